@@ -1,0 +1,62 @@
+"""What one run produces: final state, sampled history, status, diagnostics, timings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+STATUSES = ("ok", "unstable", "not_converged")
+
+# history columns, in the order the kernel writes them (see rod/kernel.py H_*)
+HISTORY_COLUMNS = (
+    "time",  # s
+    "end_rotation",  # rad, the end rotation control
+    "end_force",  # N, axial force the outside exerts on the end node (load or reaction)
+    "end_torque",  # N m, axial torque the outside exerts on the end element
+    "end_displacement",  # m, end node along the axis from its initial place
+    "applied_force",  # N, the end-force control
+    "stretch_energy",  # J
+    "bend_energy",  # J
+    "kinetic_energy",  # J
+    "contacts",  # touching element pairs
+    "penetration",  # largest overlap / radius
+    "residual",  # largest free nodal force / force scale
+    "stiffness_factor",
+    "radius_factor",
+)
+
+
+@dataclass
+class RunResult:
+    """One run. Arrays are (N, 3) per point, SI units.
+
+    positions (n+1, 3), directors (n, 3, 3) with rows d1 d2 d3, radii (n,) current radii,
+    rest_lengths (n,). history maps column name → (S,) array, with "stage" (index of the
+    protocol stage) and, when computed, "link", "twist", "writhe" (turns). snapshot_positions
+    (S, n+1, 3) and snapshot_d1 (S, n, 3) are the rod at each history row.
+    """
+
+    status: str
+    message: str
+    positions: np.ndarray
+    directors: np.ndarray
+    radii: np.ndarray
+    rest_lengths: np.ndarray
+    history: dict[str, np.ndarray]
+    snapshot_positions: np.ndarray
+    snapshot_d1: np.ndarray
+    diagnostics: dict = field(default_factory=dict)
+    stage_ends: list[int] = field(default_factory=list)  # history row closing each stage
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def rest_radius(self) -> float:
+        return float(self.diagnostics.get("rest_radius", np.nan))
+
+    @property
+    def end_rotation_turns(self) -> np.ndarray:
+        return self.history["end_rotation"] / (2 * np.pi)

@@ -1,0 +1,210 @@
+"""Self-contact of a rod: O(n) candidate search and penalty forces between capsules.
+
+Each element is a capsule (segment plus current radius). Candidate pairs come from a
+hashed uniform grid of element midpoints and are kept as a Verlet list that is rebuilt
+only when some node has moved far enough (a quarter of the skin) that a pair outside
+the list could have come into contact. All arrays are structure-of-arrays: (3, n).
+"""
+
+import numpy as np
+from numba import njit
+
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}  # never 'nnan': the guard needs NaN checks
+
+
+@njit(cache=True, inline="always")
+def _cell_hash(ix, iy, iz, mask):
+    # Large odd multipliers spread neighbouring cells over the table; collisions only cost
+    # a wasted distance test because each candidate's own cell is compared exactly.
+    return ((ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791)) & mask
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def build_pairs(x, exclusion, cutoff, pairs):
+    """Candidate element pairs (i, j), j > i + exclusion, with midpoint distance < cutoff.
+
+    x: (3, n+1) node positions. pairs: (2, capacity) int64 buffer, grown when too small.
+    Returns (pairs, count). Cost O(n) for a rod whose local density is bounded, which a
+    rod with self-contact guarantees (capsules cannot overlap much).
+    """
+    n = x.shape[1] - 1
+    mid = np.empty((3, n))
+    for i in range(n):
+        for c in range(3):
+            mid[c, i] = 0.5 * (x[c, i] + x[c, i + 1])
+    inv_h = 1.0 / cutoff
+    cell = np.empty((3, n), dtype=np.int64)
+    table_size = 1
+    while table_size < 2 * n:
+        table_size *= 2
+    mask = table_size - 1
+    bucket = np.empty(n, dtype=np.int64)
+    start = np.zeros(table_size + 1, dtype=np.int64)
+    for i in range(n):
+        for c in range(3):
+            cell[c, i] = np.int64(np.floor(mid[c, i] * inv_h))
+        b = _cell_hash(cell[0, i], cell[1, i], cell[2, i], mask)
+        bucket[i] = b
+        start[b + 1] += 1
+    for b in range(table_size):
+        start[b + 1] += start[b]
+    fill = start[:-1].copy()
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        b = bucket[i]
+        order[fill[b]] = i
+        fill[b] += 1
+
+    cut2 = cutoff * cutoff
+    count = 0
+    while True:
+        count = 0
+        overflow = False
+        capacity = pairs.shape[1]
+        for i in range(n):
+            cx = cell[0, i]
+            cy = cell[1, i]
+            cz = cell[2, i]
+            for dx in range(-1, 2):
+                for dy in range(-1, 2):
+                    for dz in range(-1, 2):
+                        b = _cell_hash(cx + dx, cy + dy, cz + dz, mask)
+                        for k in range(start[b], start[b + 1]):
+                            j = order[k]
+                            if j <= i + exclusion:
+                                continue
+                            if cell[0, j] != cx + dx or cell[1, j] != cy + dy or cell[2, j] != cz + dz:
+                                continue
+                            d0 = mid[0, i] - mid[0, j]
+                            d1 = mid[1, i] - mid[1, j]
+                            d2 = mid[2, i] - mid[2, j]
+                            if d0 * d0 + d1 * d1 + d2 * d2 < cut2:
+                                if count < capacity:
+                                    pairs[0, count] = i
+                                    pairs[1, count] = j
+                                else:
+                                    overflow = True
+                                count += 1
+        if not overflow:
+            return pairs, count
+        pairs = np.empty((2, 2 * count + 16), dtype=np.int64)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def closest_parameters(p0, p1, p2, q0, q1, q2, u0, u1, u2, w0, w1, w2):
+    """Parameters (s, t) in [0, 1] of the closest points p + s·u and q + t·w of two segments."""
+    a = u0 * u0 + u1 * u1 + u2 * u2
+    e = w0 * w0 + w1 * w1 + w2 * w2
+    r0 = p0 - q0
+    r1 = p1 - q1
+    r2 = p2 - q2
+    b = u0 * w0 + u1 * w1 + u2 * w2
+    c = u0 * r0 + u1 * r1 + u2 * r2
+    f = w0 * r0 + w1 * r1 + w2 * r2
+    denom = a * e - b * b
+    if denom > 1e-12 * a * e:
+        s = (b * f - c * e) / denom
+        s = min(max(s, 0.0), 1.0)
+    else:
+        s = 0.0  # parallel segments: any point of the overlap is a closest point
+    t = (b * s + f) / e
+    if t < 0.0:
+        t = 0.0
+        s = min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t = 1.0
+        s = min(max((b - c) / a, 0.0), 1.0)
+    return s, t
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction,
+                       slip_speed, force):
+    """Add penalty contact forces of the listed pairs to `force` (3, n+1).
+
+    Normal force per pair: max(0, k·δ − c·δ̇) along the line of closest approach, with δ the
+    overlap of the two capsules (sum of current radii minus distance). `stiffness` and
+    `damping` are per pair, (n,) arrays indexed by the first element (they are set per
+    element length) and multiplied by `scale` (stiffness) and √scale (dashpot), so that contact
+    follows a modulus ramp. Optional regularised Coulomb friction opposes the relative sliding
+    velocity of the two closest points. Forces act at the closest points and are split
+    linearly between the two nodes of each element.
+
+    Returns (number of touching pairs, largest overlap / smaller radius, its element index).
+    """
+    damping_scale = np.sqrt(scale)
+    touching = 0
+    worst = 0.0
+    worst_element = -1
+    for p in range(n_pairs):
+        i = pairs[0, p]
+        j = pairs[1, p]
+        u0 = x[0, i + 1] - x[0, i]
+        u1 = x[1, i + 1] - x[1, i]
+        u2 = x[2, i + 1] - x[2, i]
+        w0 = x[0, j + 1] - x[0, j]
+        w1 = x[1, j + 1] - x[1, j]
+        w2 = x[2, j + 1] - x[2, j]
+        s, t = closest_parameters(x[0, i], x[1, i], x[2, i], x[0, j], x[1, j], x[2, j],
+                                  u0, u1, u2, w0, w1, w2)
+        d0 = x[0, i] + s * u0 - x[0, j] - t * w0
+        d1 = x[1, i] + s * u1 - x[1, j] - t * w1
+        d2 = x[2, i] + s * u2 - x[2, j] - t * w2
+        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        overlap = radius[i] + radius[j] - dist
+        if overlap <= 0.0 or dist <= 0.0:
+            continue
+        touching += 1
+        depth = overlap / min(radius[i], radius[j])
+        if depth > worst:
+            worst = depth
+            worst_element = i
+        inv = 1.0 / dist
+        n0 = d0 * inv
+        n1 = d1 * inv
+        n2 = d2 * inv
+        rv0 = (1.0 - s) * v[0, i] + s * v[0, i + 1] - (1.0 - t) * v[0, j] - t * v[0, j + 1]
+        rv1 = (1.0 - s) * v[1, i] + s * v[1, i + 1] - (1.0 - t) * v[1, j] - t * v[1, j + 1]
+        rv2 = (1.0 - s) * v[2, i] + s * v[2, i + 1] - (1.0 - t) * v[2, j] - t * v[2, j + 1]
+        vn = rv0 * n0 + rv1 * n1 + rv2 * n2
+        fn = scale * stiffness[i] * overlap - damping_scale * damping[i] * vn
+        if fn <= 0.0:
+            continue  # a dashpot may push apart, never pull together
+        f0 = fn * n0
+        f1 = fn * n1
+        f2 = fn * n2
+        if friction > 0.0:
+            t0 = rv0 - vn * n0
+            t1 = rv1 - vn * n1
+            t2 = rv2 - vn * n2
+            vt = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+            # Regularised Coulomb: viscous below the slip speed so that sticking does not chatter.
+            scale = friction * fn / max(vt, slip_speed)
+            f0 -= scale * t0
+            f1 -= scale * t1
+            f2 -= scale * t2
+        force[0, i] += (1.0 - s) * f0
+        force[1, i] += (1.0 - s) * f1
+        force[2, i] += (1.0 - s) * f2
+        force[0, i + 1] += s * f0
+        force[1, i + 1] += s * f1
+        force[2, i + 1] += s * f2
+        force[0, j] -= (1.0 - t) * f0
+        force[1, j] -= (1.0 - t) * f1
+        force[2, j] -= (1.0 - t) * f2
+        force[0, j + 1] -= t * f0
+        force[1, j + 1] -= t * f1
+        force[2, j + 1] -= t * f2
+    return touching, worst, worst_element
+
+
+def brute_force_pairs(x, exclusion, cutoff):
+    """All pairs within `cutoff` by the O(n²) definition; the reference the grid is tested against."""
+    mid = 0.5 * (x[:, 1:] + x[:, :-1])
+    n = mid.shape[1]
+    found = set()
+    for i in range(n):
+        for j in range(i + exclusion + 1, n):
+            if np.sum((mid[:, i] - mid[:, j]) ** 2) < cutoff * cutoff:
+                found.add((i, j))
+    return found

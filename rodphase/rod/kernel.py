@@ -1,0 +1,654 @@
+"""The fused time loop of a discrete Cosserat rod (Gazzola et al., R. Soc. Open Sci. 2018).
+
+Everything here is numba-compiled and knows nothing of files, YAML or scenes: arrays in,
+arrays out. Layout is structure-of-arrays so that LLVM can vectorise the element loops:
+
+    x, v      (3, n+1)    node positions [m] and velocities [m/s], lab frame
+    Q         (3, 3, n)   element directors; Q[r, :, i] is d_{r+1} of element i (lab frame)
+    w         (3, n)      element angular velocities [rad/s], material frame
+
+Rod properties (rest values; see model.py for how they are built):
+    rest_length (n,), rest_voronoi (n-1,), node_mass (n+1,), inertia (3, n) = ρ·l0·diag(I),
+    shear_stiffness (3, n) = diag(4GA/3, 4GA/3, EA), bend_stiffness (3, n-1) = diag(EI1, EI2, GI3)
+    at the Voronoi domains, rest_curvature (3, n-1), rest_shear (3, n), rest_radius (n,),
+    contact_k / contact_c (n,) per-element contact stiffness [N/m] and dashpot [N s/m],
+    local_mask (n-1,) 1.0 on the Voronoi domains of the "active agent" segment.
+
+Controls are piecewise-linear tables in time (see the T_* indices), read by the loop; the
+scalar settings are packed in `ints` and `floats` (I_* and F_* indices). The integrator is
+position Verlet with the two half drifts merged, so positions live at half steps inside the
+loop; damping multiplies velocities by exp(-ν·dt), which is stable for any ν ≥ 0, and is
+applied before the boundary conditions so that prescribed motions are exact.
+"""
+
+import numpy as np
+from numba import njit
+
+from .contact import add_contact_forces, build_pairs
+
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}  # never 'nnan': the guard needs NaN checks
+
+# integer settings
+I_INCOMPRESSIBLE = 0
+I_CONTACT = 1
+I_EXCLUSION = 2
+I_START_HELD = 3  # 3 entries: x, y, z of node 0 held
+I_START_FRAME_HELD = 6
+I_END_HELD = 7  # 3 entries: x, y, z of node n held
+I_END_FRAME_HELD = 10
+I_SEGMENT_FIRST = 11  # first and last node of the active-agent segment
+I_SEGMENT_LAST = 12
+I_HISTORY_EVERY = 13
+I_CHECK_EVERY = 14
+I_STOP_AT_EQUILIBRIUM = 15
+N_INTS = 16
+
+# float settings
+F_DT = 0
+F_DAMPING = 1  # 1/s, translational
+F_DAMPING_ROTATION = 2  # 1/s, rotational
+F_FRICTION = 3
+F_SLIP_SPEED = 4
+F_SKIN = 5
+F_PENETRATION_LIMIT = 6  # overlap / radius that counts as a failed contact
+F_SPEED_LIMIT = 7  # m/s; faster than this is a blow-up
+F_TOLERANCE = 8
+F_FORCE_SCALE = 9
+F_LENGTH_SCALE = 10
+F_AXIS = 11  # 3 entries: unit rod axis (lab), direction of end rotation and displacement
+F_FORCE_DIRECTION = 14  # 3 entries: unit direction of the end force
+F_GRAVITY = 17  # 3 entries, m/s²
+F_EQUILIBRIUM_AFTER = 20  # no equilibrium stop before this time (controls still moving)
+N_FLOATS = 21
+
+# control tables
+T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
+T_END_FORCE = 1  # N, along F_FORCE_DIRECTION, on node n
+T_END_DISPLACEMENT = 2  # m, along the axis, of the held components of node n
+T_STIFFNESS = 3  # factor on E and G (modulus ramp)
+T_RADIUS = 4  # factor on the radius (growth); rest twist follows as 1/factor
+T_LOCAL_TWIST = 5  # rad/m added to the rest twist on the active segment
+T_LOCAL_PULL = 6  # N pulling the two ends of the active segment together
+T_START_ROTATION = 7  # rad, about the axis, of the start frame (element 0)
+N_TABLES = 8
+
+# history columns
+H_TIME = 0
+H_END_ROTATION = 1  # rad
+H_END_FORCE = 2  # N, axial force the outside exerts on node n (load or reaction)
+H_END_TORQUE = 3  # N m, axial torque the outside exerts on the end element
+H_END_DISPLACEMENT = 4  # m, of node n along the axis from its reference
+H_APPLIED_FORCE = 5  # N, the end-force control at this time
+H_STRETCH_ENERGY = 6
+H_BEND_ENERGY = 7
+H_KINETIC_ENERGY = 8
+H_CONTACTS = 9
+H_PENETRATION = 10  # largest overlap / radius
+H_RESIDUAL = 11  # largest free nodal force / force scale
+H_STIFFNESS = 12
+H_RADIUS_FACTOR = 13
+N_HISTORY = 14
+
+# status codes
+S_COMPLETED = 0
+S_EQUILIBRIUM = 1
+S_NAN = 2
+S_SPEED = 3
+S_PENETRATION = 4
+
+# info entries
+D_WHERE = 0  # node or element index where a guard tripped
+D_VALUE = 1  # the value that tripped it
+D_MAX_PENETRATION = 2
+D_REBUILDS = 3
+D_MAX_PAIRS = 4
+D_RESIDUAL = 5
+D_KINETIC = 6
+N_INFO = 7
+
+
+@njit(cache=True, inline="always")
+def table_value(times, values, count, t):
+    """Piecewise-linear interpolation, constant beyond both ends."""
+    if count == 1 or t <= times[0]:
+        return values[0]
+    if t >= times[count - 1]:
+        return values[count - 1]
+    lo = 0
+    hi = count - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if times[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    f = (t - times[lo]) / (times[hi] - times[lo])
+    return values[lo] + f * (values[hi] - values[lo])
+
+
+@njit(cache=True, inline="always")
+def table_slope(times, values, count, t):
+    if count == 1 or t < times[0] or t >= times[count - 1]:
+        return 0.0
+    lo = 0
+    while times[lo + 1] <= t:
+        lo += 1
+    return (values[lo + 1] - values[lo]) / (times[lo + 1] - times[lo])
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def rotate_frames(Q, w, scale):
+    """Q_i ← exp(−scale·[w_i]×)·Q_i: a body rotation by angle scale·|w_i| about w_i (material)."""
+    n = Q.shape[2]
+    for i in range(n):
+        u0 = scale * w[0, i]
+        u1 = scale * w[1, i]
+        u2 = scale * w[2, i]
+        th2 = u0 * u0 + u1 * u1 + u2 * u2
+        if th2 < 1e-4:
+            # sinθ/θ and (1−cosθ)/θ² to θ⁴: error below 1e-16 for θ < 1e-2
+            a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
+            b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
+        else:
+            th = np.sqrt(th2)
+            a = np.sin(th) / th
+            b = (1.0 - np.cos(th)) / th2
+        # R = I − a[u]× + b[u]×²   (the minus: Q maps lab to material coordinates)
+        r00 = 1.0 - b * (u1 * u1 + u2 * u2)
+        r11 = 1.0 - b * (u0 * u0 + u2 * u2)
+        r22 = 1.0 - b * (u0 * u0 + u1 * u1)
+        r01 = a * u2 + b * u0 * u1
+        r10 = -a * u2 + b * u0 * u1
+        r02 = -a * u1 + b * u0 * u2
+        r20 = a * u1 + b * u0 * u2
+        r12 = a * u0 + b * u1 * u2
+        r21 = -a * u0 + b * u1 * u2
+        for c in range(3):
+            q0 = Q[0, c, i]
+            q1 = Q[1, c, i]
+            q2 = Q[2, c, i]
+            Q[0, c, i] = r00 * q0 + r01 * q1 + r02 * q2
+            Q[1, c, i] = r10 * q0 + r11 * q1 + r12 * q2
+            Q[2, c, i] = r20 * q0 + r21 * q1 + r22 * q2
+
+
+@njit(cache=True, inline="always")
+def _set_rotated_frame(Q, i, reference, axis, angle):
+    """Q_i = reference · R(axis, angle)ᵀ: the reference body turned by `angle` about lab `axis`."""
+    c = np.cos(angle)
+    s = np.sin(angle)
+    k0 = axis[0]
+    k1 = axis[1]
+    k2 = axis[2]
+    # R = cI + s[k]× + (1 − c) k kᵀ
+    R = np.empty((3, 3))
+    R[0, 0] = c + (1 - c) * k0 * k0
+    R[0, 1] = -s * k2 + (1 - c) * k0 * k1
+    R[0, 2] = s * k1 + (1 - c) * k0 * k2
+    R[1, 0] = s * k2 + (1 - c) * k1 * k0
+    R[1, 1] = c + (1 - c) * k1 * k1
+    R[1, 2] = -s * k0 + (1 - c) * k1 * k2
+    R[2, 0] = -s * k1 + (1 - c) * k2 * k0
+    R[2, 1] = s * k0 + (1 - c) * k2 * k1
+    R[2, 2] = c + (1 - c) * k2 * k2
+    for r in range(3):
+        for col in range(3):
+            acc = 0.0
+            for m in range(3):
+                acc += reference[r, m] * R[col, m]
+            Q[r, col, i] = acc
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
+                   bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
+                   f_shear, f_bend, f_inertia, f_twist, local_twist,
+                   force, torque, dilatation, lengths, energies):
+    """Internal forces on nodes and torques on elements (material frame), Gazzola 2018.
+
+    force (3, n+1) and torque (3, n) are overwritten. energies[0:2] receive the stretch/shear
+    and bend/twist energies (the quadratic forms of the linear law).
+    """
+    n = rest_length.shape[0]
+    for c in range(3):
+        for i in range(n + 1):
+            force[c, i] = 0.0
+    stretch_energy = 0.0
+    for i in range(n):
+        t0 = x[0, i + 1] - x[0, i]
+        t1 = x[1, i + 1] - x[1, i]
+        t2 = x[2, i + 1] - x[2, i]
+        length = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        l0 = rest_length[i]
+        e = length / l0
+        lengths[i] = length
+        dilatation[i] = e
+        inv_l0 = 1.0 / l0
+        qt0 = Q[0, 0, i] * t0 + Q[0, 1, i] * t1 + Q[0, 2, i] * t2
+        qt1 = Q[1, 0, i] * t0 + Q[1, 1, i] * t1 + Q[1, 2, i] * t2
+        qt2 = Q[2, 0, i] * t0 + Q[2, 1, i] * t1 + Q[2, 2, i] * t2
+        s0 = qt0 * inv_l0 - rest_shear[0, i]
+        s1 = qt1 * inv_l0 - rest_shear[1, i]
+        s2 = qt2 * inv_l0 - 1.0 - rest_shear[2, i]
+        n0 = f_shear * shear_stiffness[0, i] * s0
+        n1 = f_shear * shear_stiffness[1, i] * s1
+        n2 = f_shear * shear_stiffness[2, i] * s2
+        stretch_energy += 0.5 * (n0 * s0 + n1 * s1 + n2 * s2) * l0
+        # Incompressible: the force per current area carries 1/e (A = A0/e).
+        g = 1.0 / e if incompressible else 1.0
+        f0 = g * (Q[0, 0, i] * n0 + Q[1, 0, i] * n1 + Q[2, 0, i] * n2)
+        f1 = g * (Q[0, 1, i] * n0 + Q[1, 1, i] * n1 + Q[2, 1, i] * n2)
+        f2 = g * (Q[0, 2, i] * n0 + Q[1, 2, i] * n1 + Q[2, 2, i] * n2)
+        force[0, i] += f0
+        force[1, i] += f1
+        force[2, i] += f2
+        force[0, i + 1] -= f0
+        force[1, i + 1] -= f1
+        force[2, i + 1] -= f2
+        # shear couple (Q t × n)·g: the moment of the internal force pair about the element
+        tau0 = g * (qt1 * n2 - qt2 * n1)
+        tau1 = g * (qt2 * n0 - qt0 * n2)
+        tau2 = g * (qt0 * n1 - qt1 * n0)
+        # Lagrangian transport (Jω/e) × ω and the unsteady dilatation term (Jω/e)·ė/e
+        j0 = g * f_inertia * inertia[0, i] * w[0, i]
+        j1 = g * f_inertia * inertia[1, i] * w[1, i]
+        j2 = g * f_inertia * inertia[2, i] * w[2, i]
+        tau0 += j1 * w[2, i] - j2 * w[1, i]
+        tau1 += j2 * w[0, i] - j0 * w[2, i]
+        tau2 += j0 * w[1, i] - j1 * w[0, i]
+        if incompressible:
+            edot = (t0 * (v[0, i + 1] - v[0, i]) + t1 * (v[1, i + 1] - v[1, i])
+                    + t2 * (v[2, i + 1] - v[2, i])) / (length * l0)
+            h = edot / e
+            tau0 += j0 * h
+            tau1 += j1 * h
+            tau2 += j2 * h
+        torque[0, i] = tau0
+        torque[1, i] = tau1
+        torque[2, i] = tau2
+
+    bend_energy = 0.0
+    for j in range(n - 1):
+        # R = Q_j Q_{j+1}ᵀ, R_ab = d_a(j)·d_b(j+1); κ D0 = log R (material frame)
+        r01 = Q[0, 0, j] * Q[1, 0, j + 1] + Q[0, 1, j] * Q[1, 1, j + 1] + Q[0, 2, j] * Q[1, 2, j + 1]
+        r10 = Q[1, 0, j] * Q[0, 0, j + 1] + Q[1, 1, j] * Q[0, 1, j + 1] + Q[1, 2, j] * Q[0, 2, j + 1]
+        r02 = Q[0, 0, j] * Q[2, 0, j + 1] + Q[0, 1, j] * Q[2, 1, j + 1] + Q[0, 2, j] * Q[2, 2, j + 1]
+        r20 = Q[2, 0, j] * Q[0, 0, j + 1] + Q[2, 1, j] * Q[0, 1, j + 1] + Q[2, 2, j] * Q[0, 2, j + 1]
+        r12 = Q[1, 0, j] * Q[2, 0, j + 1] + Q[1, 1, j] * Q[2, 1, j + 1] + Q[1, 2, j] * Q[2, 2, j + 1]
+        r21 = Q[2, 0, j] * Q[1, 0, j + 1] + Q[2, 1, j] * Q[1, 1, j + 1] + Q[2, 2, j] * Q[1, 2, j + 1]
+        r00 = Q[0, 0, j] * Q[0, 0, j + 1] + Q[0, 1, j] * Q[0, 1, j + 1] + Q[0, 2, j] * Q[0, 2, j + 1]
+        r11 = Q[1, 0, j] * Q[1, 0, j + 1] + Q[1, 1, j] * Q[1, 1, j + 1] + Q[1, 2, j] * Q[1, 2, j + 1]
+        r22 = Q[2, 0, j] * Q[2, 0, j + 1] + Q[2, 1, j] * Q[2, 1, j + 1] + Q[2, 2, j] * Q[2, 2, j + 1]
+        a0 = 0.5 * (r21 - r12)
+        a1 = 0.5 * (r02 - r20)
+        a2 = 0.5 * (r10 - r01)
+        s2 = a0 * a0 + a1 * a1 + a2 * a2  # sin²θ
+        cos_th = 0.5 * (r00 + r11 + r22 - 1.0)
+        if s2 < 2.5e-3 and cos_th > 0.0:
+            # θ/sinθ as a series in sinθ (asin(s)/s); truncation error < 1e-14 for s < 0.05
+            factor = 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * 35.0 / 1152.0)))
+        else:
+            s = np.sqrt(s2)
+            factor = np.arctan2(s, cos_th) / s
+        inv_d0 = 1.0 / rest_voronoi[j]
+        k0 = a0 * factor * inv_d0 - rest_curvature[0, j]
+        k1 = a1 * factor * inv_d0 - rest_curvature[1, j]
+        k2 = a2 * factor * inv_d0 - (f_twist * rest_curvature[2, j] + local_mask[j] * local_twist)
+        m0 = f_bend * bend_stiffness[0, j] * k0
+        m1 = f_bend * bend_stiffness[1, j] * k1
+        m2 = f_bend * bend_stiffness[2, j] * k2
+        bend_energy += 0.5 * (m0 * k0 + m1 * k1 + m2 * k2) * rest_voronoi[j]
+        if incompressible:
+            eps = 0.5 * (lengths[j] + lengths[j + 1]) * inv_d0
+            g3 = 1.0 / (eps * eps * eps)
+        else:
+            g3 = 1.0
+        c0 = g3 * m0
+        c1 = g3 * m1
+        c2 = g3 * m2
+        # κ × τ, with the full curvature κ (not κ − κ0), weighted by D0/ε³, split to both sides
+        kk0 = a0 * factor * inv_d0
+        kk1 = a1 * factor * inv_d0
+        kk2 = a2 * factor * inv_d0
+        h = 0.5 * rest_voronoi[j]
+        q0 = h * (kk1 * c2 - kk2 * c1)
+        q1 = h * (kk2 * c0 - kk0 * c2)
+        q2 = h * (kk0 * c1 - kk1 * c0)
+        torque[0, j] += c0 + q0
+        torque[1, j] += c1 + q1
+        torque[2, j] += c2 + q2
+        torque[0, j + 1] += q0 - c0
+        torque[1, j + 1] += q1 - c1
+        torque[2, j + 1] += q2 - c2
+    energies[0] = stretch_energy
+    energies[1] = bend_energy
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
+    for i in range(rest_radius.shape[0]):
+        if incompressible:
+            radius[i] = f_radius * rest_radius[i] / np.sqrt(dilatation[i])
+        else:
+            radius[i] = f_radius * rest_radius[i]
+
+
+@njit(cache=True)
+def _apply_held(x, v, Q, w, ints, floats, start_position, end_position, start_frame, end_frame,
+                rotation_start, rotation_end, displacement, displacement_rate):
+    """Overwrite held positions, frames and velocities: prescribed motions are exact."""
+    n = x.shape[1] - 1
+    axis = floats[F_AXIS:F_AXIS + 3]
+    for c in range(3):
+        if ints[I_START_HELD + c]:
+            x[c, 0] = start_position[c]
+            v[c, 0] = 0.0
+        if ints[I_END_HELD + c]:
+            x[c, n] = end_position[c] + displacement * axis[c]
+            v[c, n] = displacement_rate * axis[c]
+    if ints[I_START_FRAME_HELD]:
+        _set_rotated_frame(Q, 0, start_frame, axis, rotation_start)
+        for c in range(3):
+            w[c, 0] = 0.0
+    if ints[I_END_FRAME_HELD]:
+        _set_rotated_frame(Q, n - 1, end_frame, axis, rotation_end)
+        for c in range(3):
+            w[c, n - 1] = 0.0
+
+
+@njit(cache=True)
+def _hold_velocities(v, w, ints, floats, displacement_rate):
+    n = v.shape[1] - 1
+    for c in range(3):
+        if ints[I_START_HELD + c]:
+            v[c, 0] = 0.0
+        if ints[I_END_HELD + c]:
+            v[c, n] = displacement_rate * floats[F_AXIS + c]
+    if ints[I_START_FRAME_HELD]:
+        for c in range(3):
+            w[c, 0] = 0.0
+    if ints[I_END_FRAME_HELD]:
+        for c in range(3):
+            w[c, n - 1] = 0.0
+
+
+@njit(cache=True, fastmath=_FASTMATH)
+def advance(x, v, Q, w, t_start, n_steps,
+            rest_length, rest_voronoi, node_mass, inertia, shear_stiffness, bend_stiffness,
+            rest_curvature, rest_shear, rest_radius, contact_k, contact_c, local_mask,
+            ints, floats, start_position, end_position, start_frame, end_frame,
+            table_t, table_v, table_n,
+            history, snap_x, snap_d1, info):
+    """Advance the rod by up to n_steps steps of floats[F_DT] from time t_start, in place.
+
+    history (H, N_HISTORY), snap_x (H, 3, n+1) and snap_d1 (H, 3, n) receive a row every
+    ints[I_HISTORY_EVERY] steps and at the end; H must be ≥ n_steps // every + 2.
+    Returns (status, steps_taken, t_end, rows_written); info (N_INFO,) gets diagnostics.
+    """
+    n = rest_length.shape[0]
+    dt = floats[F_DT]
+    incompressible = ints[I_INCOMPRESSIBLE] != 0
+    contact_on = ints[I_CONTACT] != 0
+    exclusion = ints[I_EXCLUSION]
+    history_every = max(ints[I_HISTORY_EVERY], 1)
+    check_every = max(ints[I_CHECK_EVERY], 1)
+    stop_at_equilibrium = ints[I_STOP_AT_EQUILIBRIUM] != 0
+    seg_first = ints[I_SEGMENT_FIRST]
+    seg_last = ints[I_SEGMENT_LAST]
+    axis = floats[F_AXIS:F_AXIS + 3].copy()
+    force_dir = floats[F_FORCE_DIRECTION:F_FORCE_DIRECTION + 3].copy()
+    gravity = floats[F_GRAVITY:F_GRAVITY + 3].copy()
+    decay = np.exp(-floats[F_DAMPING] * dt)
+    decay_rotation = np.exp(-floats[F_DAMPING_ROTATION] * dt)
+    friction = floats[F_FRICTION]
+    slip_speed = floats[F_SLIP_SPEED]
+    skin = floats[F_SKIN]
+    penetration_limit = floats[F_PENETRATION_LIMIT]
+    speed_limit = floats[F_SPEED_LIMIT]
+    tolerance = floats[F_TOLERANCE]
+    force_scale = floats[F_FORCE_SCALE]
+    length_scale = floats[F_LENGTH_SCALE]
+    equilibrium_after = floats[F_EQUILIBRIUM_AFTER]
+
+    force = np.zeros((3, n + 1))
+    torque = np.zeros((3, n))
+    dilatation = np.ones(n)
+    lengths = rest_length.copy()
+    radius = rest_radius.copy()
+    energies = np.zeros(2)
+    inv_mass = 1.0 / node_mass
+    inv_inertia = 1.0 / inertia
+    x_build = x.copy()
+    pairs = np.empty((2, 16 * n + 64), dtype=np.int64)
+    n_pairs = 0
+    radius_cut = 0.0
+    need_build = True
+    rebuilds = 0
+    max_pairs = 0
+    max_penetration = 0.0
+    touching = 0
+    worst = 0.0
+    residual = np.inf
+    kinetic = np.inf
+    held_start_frame = ints[I_START_FRAME_HELD] != 0
+    held_end_frame = ints[I_END_FRAME_HELD] != 0
+
+    t = t_start
+    rows = 0
+    status = S_COMPLETED
+    steps = 0
+
+    # first half drift: positions to t + dt/2
+    for c in range(3):
+        for i in range(n + 1):
+            x[c, i] += 0.5 * dt * v[c, i]
+    rotate_frames(Q, w, 0.5 * dt)
+
+    for step in range(n_steps):
+        t_half = t + 0.5 * dt
+        rot_end = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t_half)
+        rot_start = table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_half)
+        disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t_half)
+        disp_rate = table_slope(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t_half)
+        end_force = table_value(table_t[T_END_FORCE], table_v[T_END_FORCE], table_n[T_END_FORCE], t_half)
+        f_stiff = table_value(table_t[T_STIFFNESS], table_v[T_STIFFNESS], table_n[T_STIFFNESS], t_half)
+        f_radius = table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t_half)
+        local_twist = table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t_half)
+        local_pull = table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t_half)
+        _apply_held(x, v, Q, w, ints, floats, start_position, end_position, start_frame, end_frame,
+                    rot_start, rot_end, disp, disp_rate)
+
+        # Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r (a·κ3⁰ fixed).
+        r2 = f_radius * f_radius
+        internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
+                       bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
+                       f_stiff * r2, f_stiff * r2 * r2, r2 * r2, 1.0 / f_radius, local_twist,
+                       force, torque, dilatation, lengths, energies)
+
+        if contact_on:
+            _radii(rest_radius, dilatation, f_radius, incompressible, radius)
+            if not need_build:
+                moved = 0.0
+                for i in range(n + 1):
+                    d0 = x[0, i] - x_build[0, i]
+                    d1 = x[1, i] - x_build[1, i]
+                    d2 = x[2, i] - x_build[2, i]
+                    moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
+                # A pair outside the list needs its gap to shrink by > skin: midpoints and
+                # half-lengths each move by at most the largest node displacement, so 4·moved.
+                if 16.0 * moved > skin * skin:
+                    need_build = True
+                else:
+                    for i in range(n):
+                        if radius[i] > radius_cut:
+                            need_build = True
+                            break
+            if need_build:
+                longest = 0.0
+                biggest = 0.0
+                for i in range(n):
+                    longest = max(longest, lengths[i])
+                    biggest = max(biggest, radius[i])
+                radius_cut = 1.1 * biggest
+                pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
+                x_build[:, :] = x
+                need_build = False
+                rebuilds += 1
+                max_pairs = max(max_pairs, n_pairs)
+            touching, worst, worst_at = add_contact_forces(
+                x, v, radius, pairs, n_pairs, contact_k, contact_c, f_stiff, friction, slip_speed, force)
+            if worst > max_penetration:
+                max_penetration = worst
+            if worst > penetration_limit:
+                status = S_PENETRATION
+                info[D_WHERE] = worst_at
+                info[D_VALUE] = worst
+                break
+
+        # external loads
+        for c in range(3):
+            force[c, n] += end_force * force_dir[c]
+        if gravity[0] != 0.0 or gravity[1] != 0.0 or gravity[2] != 0.0:
+            for c in range(3):
+                for i in range(n + 1):
+                    force[c, i] += node_mass[i] * r2 * gravity[c]
+        if local_pull != 0.0 and seg_last > seg_first:
+            d0 = x[0, seg_last] - x[0, seg_first]
+            d1 = x[1, seg_last] - x[1, seg_first]
+            d2 = x[2, seg_last] - x[2, seg_first]
+            dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if dn > 0.0:
+                p = local_pull / dn
+                force[0, seg_first] += p * d0
+                force[1, seg_first] += p * d1
+                force[2, seg_first] += p * d2
+                force[0, seg_last] -= p * d0
+                force[1, seg_last] -= p * d1
+                force[2, seg_last] -= p * d2
+
+        # kick
+        for c in range(3):
+            for i in range(n + 1):
+                v[c, i] = (v[c, i] + dt * force[c, i] * inv_mass[i] / r2) * decay
+        for c in range(3):
+            for i in range(n):
+                gi = dilatation[i] if incompressible else 1.0
+                w[c, i] = (w[c, i] + dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2)) * decay_rotation
+        _hold_velocities(v, w, ints, floats, disp_rate)
+
+        t_next = t + dt
+        last = step == n_steps - 1
+        check = (step + 1) % check_every == 0 or last
+        record = (step + 1) % history_every == 0 or last
+        if check or record:
+            # Residual: largest nodal force and element torque / length on free degrees of freedom.
+            res = 0.0
+            kin = 0.0
+            for i in range(n + 1):
+                fm = 0.0
+                vv = 0.0
+                for c in range(3):
+                    held = (i == 0 and ints[I_START_HELD + c] != 0) or (i == n and ints[I_END_HELD + c] != 0)
+                    if not held:
+                        fm += force[c, i] * force[c, i]
+                    vv += v[c, i] * v[c, i]
+                res = max(res, np.sqrt(fm))
+                kin += 0.5 * node_mass[i] * r2 * vv
+                if not np.isfinite(vv) or not np.isfinite(fm):
+                    status = S_NAN
+                    info[D_WHERE] = i
+                    info[D_VALUE] = vv
+                    break
+                if vv > speed_limit * speed_limit:
+                    status = S_SPEED
+                    info[D_WHERE] = i
+                    info[D_VALUE] = np.sqrt(vv)
+                    break
+            if status != S_COMPLETED:
+                break
+            for i in range(n):
+                if (i == 0 and held_start_frame) or (i == n - 1 and held_end_frame):
+                    continue
+                tm = 0.0
+                for c in range(3):
+                    tm += torque[c, i] * torque[c, i]
+                    kin += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+                res = max(res, np.sqrt(tm) / rest_length[i])
+            if not np.isfinite(kin) or not np.isfinite(res):
+                status = S_NAN
+                info[D_WHERE] = -1
+                info[D_VALUE] = kin
+                break
+            residual = res / force_scale
+            kinetic = kin / (force_scale * length_scale)
+            if record:
+                # positions are at t + dt/2; bring the recorded ones to t + dt
+                for c in range(3):
+                    for i in range(n + 1):
+                        snap_x[rows, c, i] = x[c, i] + 0.5 * dt * v[c, i]
+                Qs = Q.copy()
+                rotate_frames(Qs, w, 0.5 * dt)
+                for c in range(3):
+                    for i in range(n):
+                        snap_d1[rows, c, i] = Qs[0, c, i]
+                # axial force the outside exerts on node n: minus the rod's force on it
+                rod_on_end = 0.0
+                for c in range(3):
+                    rod_on_end += (force[c, n] - end_force * force_dir[c]) * axis[c]
+                # axial torque the outside exerts on the end element, in the lab frame
+                torque_axial = 0.0
+                for c in range(3):
+                    torque_axial += (Q[0, c, n - 1] * torque[0, n - 1] + Q[1, c, n - 1] * torque[1, n - 1]
+                                     + Q[2, c, n - 1] * torque[2, n - 1]) * axis[c]
+                end_disp = 0.0
+                for c in range(3):
+                    end_disp += (snap_x[rows, c, n] - end_position[c]) * axis[c]
+                history[rows, H_TIME] = t_next
+                history[rows, H_END_ROTATION] = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION],
+                                                            table_n[T_END_ROTATION], t_next)
+                history[rows, H_END_FORCE] = -rod_on_end
+                history[rows, H_END_TORQUE] = -torque_axial
+                history[rows, H_END_DISPLACEMENT] = end_disp
+                history[rows, H_APPLIED_FORCE] = end_force
+                history[rows, H_STRETCH_ENERGY] = energies[0]
+                history[rows, H_BEND_ENERGY] = energies[1]
+                history[rows, H_KINETIC_ENERGY] = kin
+                history[rows, H_CONTACTS] = touching
+                history[rows, H_PENETRATION] = worst
+                history[rows, H_RESIDUAL] = residual
+                history[rows, H_STIFFNESS] = f_stiff
+                history[rows, H_RADIUS_FACTOR] = f_radius
+                rows += 1
+
+        # drift: a full step, or half a step to land on t + dt at the end
+        h = 0.5 * dt if last else dt
+        for c in range(3):
+            for i in range(n + 1):
+                x[c, i] += h * v[c, i]
+        rotate_frames(Q, w, h)
+        t = t_next
+        steps = step + 1
+
+        if (check and stop_at_equilibrium and t >= equilibrium_after
+                and residual < tolerance and kinetic < tolerance * tolerance):
+            status = S_EQUILIBRIUM
+            if not last:
+                # undo the extra half step so the state is at time t
+                for c in range(3):
+                    for i in range(n + 1):
+                        x[c, i] -= 0.5 * dt * v[c, i]
+                rotate_frames(Q, w, -0.5 * dt)
+            break
+
+    if status == S_COMPLETED or status == S_EQUILIBRIUM:
+        rot_end = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t)
+        rot_start = table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t)
+        disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t)
+        _apply_held(x, v, Q, w, ints, floats, start_position, end_position, start_frame, end_frame,
+                    rot_start, rot_end, disp, 0.0)
+    info[D_MAX_PENETRATION] = max_penetration
+    info[D_REBUILDS] = rebuilds
+    info[D_MAX_PAIRS] = max_pairs
+    info[D_RESIDUAL] = residual
+    info[D_KINETIC] = kinetic
+    return status, steps, t, rows

@@ -1,0 +1,268 @@
+"""The rod problem as plain data: material and geometry, ends, controls, contact, solver.
+
+These objects are what the kernel needs, in SI units, and nothing else: no YAML, no files.
+Public arrays are (N, 3), one point per row; they are converted to the kernel's (3, N)
+layout in `simulate`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+Table = tuple[tuple[float, ...], tuple[float, ...]]  # (times [s], values): piecewise linear
+
+
+def constant(value: float) -> Table:
+    return ((0.0,), (float(value),))
+
+
+def ramp(t0: float, t1: float, v0: float, v1: float) -> Table:
+    """v0 until t0, linear to v1 at t1, v1 after."""
+    if t1 <= t0:
+        return ((t0,), (float(v1),))
+    return ((float(t0), float(t1)), (float(v0), float(v1)))
+
+
+@dataclass(frozen=True)
+class Rod:
+    """A uniform rod at rest: straight reference, circular section, linear elastic law.
+
+    rest_curvature is the intrinsic (κ1, κ2, κ3) in the material frame [1/m]; κ3 is the
+    intrinsic twist. With `incompressible`, the section shrinks as the rod stretches
+    (A·e constant, a = a0/√e, I = I0/e²) through the 1/e and 1/e³ factors of Gazzola 2018;
+    without it the law is the plain quadratic energy (used to test conservation).
+    """
+
+    length: float  # m, rest length L0
+    radius: float  # m, rest radius a0
+    elements: int
+    density: float = 1000.0  # kg/m³
+    youngs_modulus: float = 1.0e6  # Pa
+    shear_modulus: float = 2.0e6 / 3.0  # Pa; the paper's G = 2E/3
+    rest_curvature: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    incompressible: bool = True
+
+    @property
+    def area(self) -> float:
+        return math.pi * self.radius**2
+
+    @property
+    def second_moment(self) -> float:
+        return math.pi * self.radius**4 / 4.0
+
+    @property
+    def bending_stiffness(self) -> float:
+        return self.youngs_modulus * self.second_moment
+
+    @property
+    def twist_stiffness(self) -> float:
+        return self.shear_modulus * 2.0 * self.second_moment
+
+    @property
+    def buckling_force(self) -> float:
+        """F_C = π² E I / L0², the paper's unit of load."""
+        return math.pi**2 * self.bending_stiffness / self.length**2
+
+    @property
+    def element_length(self) -> float:
+        return self.length / self.elements
+
+
+@dataclass(frozen=True)
+class Ends:
+    """How the two ends are held. Node 0 / element 0 is the start, node n / element n-1 the end.
+
+    `*_held` lists which lab components (x, y, z) of the end node are held at their initial
+    place (plus the end displacement control along the axis, for the end node); `*_frame_held`
+    holds the end element's frame at its initial orientation turned by the rotation control
+    about `axis`. A clamp holds all three components and the frame.
+    """
+
+    start_held: tuple[bool, bool, bool] = (True, True, True)
+    start_frame_held: bool = True
+    end_held: tuple[bool, bool, bool] = (False, False, False)
+    end_frame_held: bool = False
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Controls:
+    """Time tables the loop reads: what moves during a run."""
+
+    end_rotation: Table = constant(0.0)  # rad about the axis
+    start_rotation: Table = constant(0.0)  # rad about the axis
+    end_force: Table = constant(0.0)  # N along force_direction, on the end node
+    force_direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    end_displacement: Table = constant(0.0)  # m along the axis, held components of the end node
+    stiffness: Table = constant(1.0)  # factor on E and G
+    radius: Table = constant(1.0)  # factor on the radius; rest twist scales as its inverse
+    local_twist: Table = constant(0.0)  # rad/m added to the rest twist over `segment`
+    local_pull: Table = constant(0.0)  # N pulling the segment's two end nodes together
+    segment: tuple[int, int] = (0, 0)  # first and last node of the active-agent segment
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def tables(self) -> list[Table]:
+        from . import kernel as k
+
+        out: list[Table] = [constant(0.0)] * k.N_TABLES
+        out[k.T_END_ROTATION] = self.end_rotation
+        out[k.T_START_ROTATION] = self.start_rotation
+        out[k.T_END_FORCE] = self.end_force
+        out[k.T_END_DISPLACEMENT] = self.end_displacement
+        out[k.T_STIFFNESS] = self.stiffness
+        out[k.T_RADIUS] = self.radius
+        out[k.T_LOCAL_TWIST] = self.local_twist
+        out[k.T_LOCAL_PULL] = self.local_pull
+        return out
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Frictionless (by default) penalty self-contact between non-neighbouring elements.
+
+    stiffness: the pair spring per unit element length in units of E (k = stiffness·E·l0),
+    so that a line load q = 10 E·δ... is resisted with an overlap δ = q / (stiffness·E).
+    exclusion: elements closer than this arc length (in rest radii) never interact; a rod
+    cannot bend back on itself tighter than about π·a.
+    """
+
+    enabled: bool = False
+    stiffness: float = 10.0
+    damping_ratio: float = 0.5
+    friction: float = 0.0
+    slip_speed: float = 1e-4  # m/s, below it friction is viscous (regularised Coulomb)
+    exclusion: float = math.pi  # rest radii of arc length
+    skin: float = 0.5  # rest radii; the Verlet-list margin
+    penetration_limit: float = 0.5  # overlap / radius beyond which the run is unstable
+
+
+@dataclass(frozen=True)
+class Solver:
+    """Time stepping. dt=None derives it from the stiffest mode with the safety factor."""
+
+    dt: float | None = None
+    safety: float = 0.5
+    damping: float = 2.0  # 1/s; velocities decay as exp(-damping·t) without forces
+    rotational_damping: float | None = None  # 1/s; None = same as damping
+    history_interval: float = 0.05  # s between history rows
+    check_interval: int = 50  # steps between guard and equilibrium checks
+    tolerance: float = 1e-4  # equilibrium: residual force / force scale
+    speed_limit: float | None = None  # m/s; None = the axial wave speed
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One phase of a protocol: run `duration` seconds, or less if `until_equilibrium`.
+
+    `controls` (times relative to the stage start) replaces the problem's controls for this
+    stage; an equilibrium stop is allowed only once its tables have stopped moving.
+    """
+
+    duration: float
+    until_equilibrium: bool = False
+    label: str = ""
+    controls: Controls | None = None
+
+
+@dataclass
+class RodState:
+    """Kernel state in (3, N) layout. Use `positions` and `directors` for (N, 3) views."""
+
+    time: float
+    x: np.ndarray  # (3, n+1)
+    v: np.ndarray  # (3, n+1)
+    Q: np.ndarray  # (3, 3, n), Q[r, :, i] = d_{r+1} of element i
+    w: np.ndarray  # (3, n), material frame
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(n+1, 3) node positions [m]."""
+        return np.ascontiguousarray(self.x.T)
+
+    @property
+    def directors(self) -> np.ndarray:
+        """(n, 3, 3): directors[i, r] is d_{r+1} of element i in the lab frame."""
+        return np.ascontiguousarray(np.transpose(self.Q, (2, 0, 1)))
+
+    def copy(self) -> "RodState":
+        return RodState(self.time, self.x.copy(), self.v.copy(), self.Q.copy(), self.w.copy())
+
+
+def state_from(positions: np.ndarray, directors: np.ndarray, time: float = 0.0) -> RodState:
+    """A state at rest from (n+1, 3) positions and (n, 3, 3) directors (rows d1, d2, d3)."""
+    positions = np.asarray(positions, dtype=float)
+    directors = np.asarray(directors, dtype=float)
+    n = directors.shape[0]
+    if positions.shape != (n + 1, 3) or directors.shape != (n, 3, 3):
+        raise ValueError(f"positions must be (n+1, 3) and directors (n, 3, 3); got {positions.shape}"
+                         f" and {directors.shape}")
+    x = np.ascontiguousarray(positions.T)
+    Q = np.ascontiguousarray(np.transpose(directors, (1, 2, 0)))
+    return RodState(time, x, np.zeros_like(x), Q, np.zeros((3, n)))
+
+
+def straight_state(rod: Rod, axis=(0.0, 0.0, 1.0), twist_turns: float = 0.0,
+                   origin=(0.0, 0.0, 0.0)) -> RodState:
+    """A straight rod from `origin` along `axis` at rest, d3 = axis, d1 turned uniformly by
+    `twist_turns` turns from the first to the last element (about the axis)."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    n = rod.elements
+    s = np.linspace(0.0, rod.length, n + 1)
+    positions = np.asarray(origin, float) + s[:, None] * axis
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    d1 = helper - axis * (helper @ axis)
+    d1 /= np.linalg.norm(d1)
+    d2 = np.cross(axis, d1)
+    angles = 2 * np.pi * twist_turns * (np.arange(n) + 0.5) / n if twist_turns else np.zeros(n)
+    directors = np.empty((n, 3, 3))
+    c, sn = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    directors[:, 0] = c * d1 + sn * d2
+    directors[:, 1] = -sn * d1 + c * d2
+    directors[:, 2] = axis
+    return state_from(positions, directors)
+
+
+def wave_speeds(rod: Rod, stiffness_factor: float = 1.0) -> tuple[float, float]:
+    """(axial, shear) wave speeds [m/s]."""
+    e = rod.youngs_modulus * stiffness_factor
+    g = rod.shear_modulus * stiffness_factor
+    return math.sqrt(e / rod.density), math.sqrt(max(4.0 * g / 3.0, g) / rod.density)
+
+
+def stable_time_step(rod: Rod, contact: Contact, stiffness_factor: float = 1.0,
+                     radius_factor: float = 1.0) -> float:
+    """Largest dt that position Verlet takes stably, 2/ω_max, from the stiffest modes.
+
+    ω_max² sums the chain mode of the stiffest wave speed c over an element, (2c/l)², the
+    rotation of a section against its shear, 16G/(3ρa²) (the shear couple S1·l over the
+    rotational inertia ρI1·l), and, with contact, the pair spring over an element mass with
+    up to four partners at once. Stretching only lengthens elements, so rest values bound it.
+    """
+    c_axial, c_shear = wave_speeds(rod, stiffness_factor)
+    c = max(c_axial, c_shear)
+    l0 = rod.element_length
+    a = rod.radius * min(radius_factor, 1.0)
+    g = rod.shear_modulus * stiffness_factor
+    omega2 = (2.0 * c / l0) ** 2 + 16.0 * g / (3.0 * rod.density * a * a)
+    if contact.enabled:
+        omega2 += 4.0 * contact.stiffness * rod.youngs_modulus * stiffness_factor / (
+            rod.density * rod.area * radius_factor**2)
+    return 2.0 / math.sqrt(omega2)
+
+
+@dataclass
+class Problem:
+    """Everything one run needs, assembled by a scene."""
+
+    rod: Rod
+    state: RodState
+    ends: Ends = field(default_factory=Ends)
+    controls: Controls = field(default_factory=Controls)
+    contact: Contact = field(default_factory=Contact)
+    solver: Solver = field(default_factory=Solver)
+    stages: tuple[Stage, ...] = (Stage(1.0),)
+    force_scale: float | None = None  # N; default max(|end force|, F_C)
+    name: str = ""

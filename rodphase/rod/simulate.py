@@ -1,0 +1,266 @@
+"""Run a Problem through its stages with the compiled kernel and collect a RunResult.
+
+This is the only place that converts between the public (N, 3) arrays and the kernel's
+(3, N) layout, picks the time step, and turns kernel status codes into messages.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import numpy as np
+
+from ..result import HISTORY_COLUMNS, RunResult
+from . import kernel as k
+from .model import Controls, Problem, RodState, Table, stable_time_step
+
+_GUARD_NAMES = {
+    k.S_NAN: "non-finite state (NaN or inf)",
+    k.S_SPEED: "runaway velocity",
+    k.S_PENETRATION: "contact penetration",
+}
+
+
+def _table_arrays(tables: list[Table], shift: float):
+    width = max(len(t[0]) for t in tables)
+    times = np.zeros((len(tables), width))
+    values = np.zeros((len(tables), width))
+    counts = np.zeros(len(tables), dtype=np.int64)
+    for row, (ts, vs) in enumerate(tables):
+        m = len(ts)
+        times[row, :m] = np.asarray(ts, float) + shift
+        values[row, :m] = vs
+        times[row, m:] = times[row, m - 1]
+        values[row, m:] = values[row, m - 1]
+        counts[row] = m
+    return times, values, counts
+
+
+def _table_extreme(table: Table, pick) -> float:
+    return float(pick(table[1]))
+
+
+def time_step(problem: Problem) -> tuple[float, float]:
+    """(dt, stable bound) for the problem: the user's dt or safety × the bound over all stages."""
+    controls = [problem.controls] + [s.controls for s in problem.stages if s.controls is not None]
+    stiff = max(_table_extreme(c.stiffness, max) for c in controls)
+    grow = min(_table_extreme(c.radius, min) for c in controls)
+    bound = stable_time_step(problem.rod, problem.contact, stiff, grow)
+    dt = problem.solver.dt if problem.solver.dt is not None else problem.solver.safety * bound
+    return dt, bound
+
+
+def _rod_arrays(problem: Problem):
+    rod = problem.rod
+    n = rod.elements
+    if n < 2:
+        raise ValueError(f"rod.elements: {n} (allowed: at least 2)")
+    l0 = np.full(n, rod.element_length)
+    d0 = 0.5 * (l0[1:] + l0[:-1])
+    area = rod.area
+    i1 = rod.second_moment
+    mass = rod.density * area * l0
+    node_mass = np.zeros(n + 1)
+    node_mass[:-1] += 0.5 * mass
+    node_mass[1:] += 0.5 * mass
+    inertia = np.empty((3, n))
+    inertia[0] = inertia[1] = rod.density * i1 * l0
+    inertia[2] = rod.density * 2 * i1 * l0
+    shear = np.empty((3, n))
+    shear[0] = shear[1] = 4.0 * rod.shear_modulus * area / 3.0
+    shear[2] = rod.youngs_modulus * area
+    bend = np.empty((3, n - 1))
+    bend[0] = bend[1] = rod.youngs_modulus * i1
+    bend[2] = rod.shear_modulus * 2 * i1
+    curvature = np.tile(np.asarray(rod.rest_curvature, float)[:, None], (1, n - 1))
+    rest_shear = np.zeros((3, n))
+    rest_radius = np.full(n, rod.radius)
+    c = problem.contact
+    contact_k = c.stiffness * rod.youngs_modulus * l0
+    contact_c = 2.0 * c.damping_ratio * np.sqrt(contact_k * mass)
+    return dict(rest_length=l0, rest_voronoi=d0, node_mass=node_mass, inertia=inertia,
+                shear_stiffness=shear, bend_stiffness=bend, rest_curvature=curvature,
+                rest_shear=rest_shear, rest_radius=rest_radius, contact_k=contact_k,
+                contact_c=contact_c)
+
+
+def _settings(problem: Problem, dt: float, history_every: int, until_equilibrium: bool,
+              equilibrium_after: float, controls: Controls):
+    rod, ends, contact, solver = problem.rod, problem.ends, problem.contact, problem.solver
+    ints = np.zeros(k.N_INTS, dtype=np.int64)
+    ints[k.I_INCOMPRESSIBLE] = rod.incompressible
+    ints[k.I_CONTACT] = contact.enabled
+    ints[k.I_EXCLUSION] = max(1, math.ceil(contact.exclusion * rod.radius / rod.element_length))
+    ints[k.I_START_HELD:k.I_START_HELD + 3] = ends.start_held
+    ints[k.I_START_FRAME_HELD] = ends.start_frame_held
+    ints[k.I_END_HELD:k.I_END_HELD + 3] = ends.end_held
+    ints[k.I_END_FRAME_HELD] = ends.end_frame_held
+    ints[k.I_SEGMENT_FIRST], ints[k.I_SEGMENT_LAST] = controls.segment
+    ints[k.I_HISTORY_EVERY] = history_every
+    ints[k.I_CHECK_EVERY] = solver.check_interval
+    ints[k.I_STOP_AT_EQUILIBRIUM] = until_equilibrium
+    floats = np.zeros(k.N_FLOATS)
+    floats[k.F_DT] = dt
+    floats[k.F_DAMPING] = solver.damping
+    floats[k.F_DAMPING_ROTATION] = (solver.damping if solver.rotational_damping is None
+                                    else solver.rotational_damping)
+    floats[k.F_FRICTION] = contact.friction
+    floats[k.F_SLIP_SPEED] = contact.slip_speed
+    floats[k.F_SKIN] = contact.skin * rod.radius
+    floats[k.F_PENETRATION_LIMIT] = contact.penetration_limit
+    c_axial = math.sqrt(rod.youngs_modulus / rod.density)
+    floats[k.F_SPEED_LIMIT] = solver.speed_limit if solver.speed_limit is not None else c_axial
+    floats[k.F_TOLERANCE] = solver.tolerance
+    floats[k.F_FORCE_SCALE] = force_scale(problem)
+    floats[k.F_LENGTH_SCALE] = rod.length
+    axis = np.asarray(ends.axis, float)
+    floats[k.F_AXIS:k.F_AXIS + 3] = axis / np.linalg.norm(axis)
+    fdir = np.asarray(controls.force_direction, float)
+    floats[k.F_FORCE_DIRECTION:k.F_FORCE_DIRECTION + 3] = fdir / np.linalg.norm(fdir)
+    floats[k.F_GRAVITY:k.F_GRAVITY + 3] = controls.gravity
+    floats[k.F_EQUILIBRIUM_AFTER] = equilibrium_after
+    return ints, floats
+
+
+def force_scale(problem: Problem) -> float:
+    """The force that residuals are measured against: the largest end load, at least F_C."""
+    if problem.force_scale is not None:
+        return problem.force_scale
+    controls = [problem.controls] + [s.controls for s in problem.stages if s.controls is not None]
+    load = max(max(abs(v) for v in c.end_force[1]) for c in controls)
+    return max(load, problem.rod.buckling_force)
+
+
+def _local_mask(n: int, segment: tuple[int, int]) -> np.ndarray:
+    mask = np.zeros(n - 1)
+    first, last = segment
+    if last > first:
+        # Voronoi domain j sits at node j+1: the interior nodes of the segment
+        mask[max(first, 0):max(min(last - 1, n - 1), 0)] = 1.0
+    return mask
+
+
+def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool = False) -> RunResult:
+    """Advance `problem.state` through `problem.stages` and return a RunResult.
+
+    A stage with `until_equilibrium` ends early once the largest free nodal force (and
+    torque per element length) is below solver.tolerance × force scale and the kinetic
+    energy below tolerance² × force scale × L0; if it never gets there the run's status is
+    `not_converged`. A guard (non-finite state, runaway velocity, penetration) stops the
+    run with status `unstable` and a message saying when, where, and what to change.
+    """
+    rod = problem.rod
+    n = rod.elements
+    dt, bound = time_step(problem)
+    notes: list[str] = []
+    if problem.solver.dt is not None and dt > bound:
+        note = (f"solver.dt = {dt:.3g} s is above the stable bound {bound:.3g} s for "
+                f"{n} elements; the run will likely go unstable")
+        warnings.warn(note, stacklevel=2)
+        notes.append(note)
+    history_every = max(1, int(round(problem.solver.history_interval / dt)))
+    arrays = _rod_arrays(problem)
+    state: RodState = problem.state.copy()
+    start_position = state.x[:, 0].copy()
+    end_position = state.x[:, n].copy()
+    start_frame = state.Q[:, :, 0].copy()
+    end_frame = state.Q[:, :, n - 1].copy()
+
+    rows_h, rows_x, rows_d, stage_ids, stage_ends = [], [], [], [], []
+    info = np.zeros(k.N_INFO)
+    status, message = "ok", "completed"
+    steps_total = 0
+    rebuilds = 0
+    max_pairs = 0
+    max_pen = 0.0
+    stage_report = []
+    wall0 = time.perf_counter()
+    budget = max_steps if max_steps is not None else np.iinfo(np.int64).max
+    for index, stage in enumerate(problem.stages):
+        controls = stage.controls if stage.controls is not None else problem.controls
+        t0 = state.time
+        tables = controls.tables()
+        last_break = max(max(tb[0]) for tb in tables)
+        ints, floats = _settings(problem, dt, history_every, stage.until_equilibrium,
+                                 t0 + last_break, controls)
+        table_t, table_v, table_n = _table_arrays(tables, t0)
+        n_steps = int(math.ceil(stage.duration / dt - 1e-9))
+        n_steps = min(n_steps, budget - steps_total)
+        if n_steps <= 0:
+            break
+        capacity = n_steps // history_every + 2
+        hist = np.zeros((capacity, k.N_HISTORY))
+        snap_x = np.zeros((capacity, 3, n + 1))
+        snap_d = np.zeros((capacity, 3, n))
+        code, steps, t_end, rows = k.advance(
+            state.x, state.v, state.Q, state.w, t0, n_steps,
+            arrays["rest_length"], arrays["rest_voronoi"], arrays["node_mass"], arrays["inertia"],
+            arrays["shear_stiffness"], arrays["bend_stiffness"], arrays["rest_curvature"],
+            arrays["rest_shear"], arrays["rest_radius"], arrays["contact_k"], arrays["contact_c"],
+            _local_mask(n, controls.segment), ints, floats, start_position, end_position,
+            start_frame, end_frame, table_t, table_v, table_n, hist, snap_x, snap_d, info)
+        state.time = t_end
+        steps_total += steps
+        rebuilds += int(info[k.D_REBUILDS])
+        max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
+        max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
+        rows_h.append(hist[:rows])
+        rows_x.append(snap_x[:rows])
+        rows_d.append(snap_d[:rows])
+        stage_ids.append(np.full(rows, index))
+        stage_ends.append(sum(len(r) for r in rows_h) - 1)
+        label = stage.label or f"stage {index}"
+        stage_report.append({"label": label, "steps": int(steps), "end_time": float(t_end),
+                             "equilibrium": code == k.S_EQUILIBRIUM,
+                             "residual": float(info[k.D_RESIDUAL])})
+        if code in _GUARD_NAMES:
+            status = "unstable"
+            where = int(info[k.D_WHERE])
+            unit = "element" if code == k.S_PENETRATION else "node"
+            message = (f"unstable in {label} at t = {t_end:.4g} s: {_GUARD_NAMES[code]} at {unit} "
+                       f"{where} (value {info[k.D_VALUE]:.3g}); dt = {dt:.3g} s, stable bound "
+                       f"{bound:.3g} s. Try a smaller solver.dt or solver.safety, more "
+                       f"solver.damping, or a stiffer contact.stiffness.")
+            break
+        if stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
+            status = "not_converged"
+            message = (f"{label} did not reach equilibrium in {stage.duration:g} s (residual "
+                       f"{info[k.D_RESIDUAL]:.2g}, kinetic {info[k.D_KINETIC]:.2g}, tolerance "
+                       f"{problem.solver.tolerance:g}). Increase the hold time, the damping, or "
+                       f"the tolerance.")
+        if steps_total >= budget:
+            if status == "ok":
+                status = "not_converged"
+                message = f"stopped after max_steps = {budget} steps in {label}"
+            break
+    wall = time.perf_counter() - wall0
+
+    hist = np.concatenate(rows_h) if rows_h else np.zeros((0, k.N_HISTORY))
+    history = {name: hist[:, col].copy() for col, name in enumerate(HISTORY_COLUMNS)}
+    history["stage"] = np.concatenate(stage_ids) if stage_ids else np.zeros(0, dtype=np.int64)
+    snapshot_positions = (np.transpose(np.concatenate(rows_x), (0, 2, 1)) if rows_x
+                          else np.zeros((0, n + 1, 3)))
+    snapshot_d1 = np.transpose(np.concatenate(rows_d), (0, 2, 1)) if rows_d else np.zeros((0, n, 3))
+    if topology and len(snapshot_positions):
+        from ..topology import topology_history
+
+        lk, tw, wr = topology_history(snapshot_positions, snapshot_d1)
+        history["link"], history["twist"], history["writhe"] = lk, tw, wr
+
+    lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
+    rest = arrays["rest_length"]
+    radius_factor = float(hist[-1, k.H_RADIUS_FACTOR]) if len(hist) else 1.0
+    radii = rod.radius * radius_factor * (np.sqrt(rest / lengths) if rod.incompressible else 1.0)
+    diagnostics = {
+        "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
+        "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
+        "max_pairs": max_pairs, "max_penetration": max_pen, "final_time": state.time,
+        "rest_radius": rod.radius, "rest_length": rod.length, "elements": n,
+        "force_scale": force_scale(problem), "stages": stage_report, "notes": notes,
+    }
+    return RunResult(status=status, message=message, positions=state.positions,
+                     directors=state.directors, radii=radii, rest_lengths=rest.copy(),
+                     history=history, snapshot_positions=snapshot_positions,
+                     snapshot_d1=snapshot_d1, diagnostics=diagnostics, stage_ends=stage_ends)
