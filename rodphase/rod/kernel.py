@@ -46,7 +46,7 @@ N_INTS = 16
 # float settings
 F_DT = 0
 F_DAMPING = 1  # 1/s, translational
-F_DAMPING_ROTATION = 2  # 1/s, rotational
+F_DAMPING_ROTATION = 2  # 1/s, rotational, about d1 and d2 (half of it about d3)
 F_FRICTION = 3
 F_SLIP_SPEED = 4
 F_SKIN = 5
@@ -173,8 +173,8 @@ def rotate_frames(Q, w, scale):
 
 
 @njit(cache=True, inline="always")
-def _set_rotated_frame(Q, i, reference, axis, angle):
-    """Q_i = reference · R(axis, angle)ᵀ: the reference body turned by `angle` about lab `axis`."""
+def rotated_frame(reference, axis, angle, out):
+    """out = reference · R(axis, angle)ᵀ: the reference body turned by `angle` about lab `axis`."""
     c = np.cos(angle)
     s = np.sin(angle)
     k0 = axis[0]
@@ -196,7 +196,47 @@ def _set_rotated_frame(Q, i, reference, axis, angle):
             acc = 0.0
             for m in range(3):
                 acc += reference[r, m] * R[col, m]
-            Q[r, col, i] = acc
+            out[r, col] = acc
+
+
+@njit(cache=True, inline="always")
+def _log_factor(s2, cos_th):
+    """θ/sinθ from sin²θ and cosθ, for the matrix log."""
+    if s2 < 2.5e-3 and cos_th > 0.0:
+        # asin(s)/s as a series in s = sinθ; truncation error < 1e-14 for s < 0.05
+        return 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * 35.0 / 1152.0)))
+    s = np.sqrt(s2)
+    return np.arctan2(s, cos_th) / s
+
+
+@njit(cache=True)
+def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result):
+    """Couple of a clamp spring between frames A and B (rows d1 d2 d3) over half an element.
+
+    κ = log(A Bᵀ)/half_length in the material frame; result[0:3] = g3·B(κ − κ0) (the couple),
+    result[3:6] = half_length·κ × couple (its share of the κ × τ term), result[6] the energy.
+    """
+    r = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            r[i, j] = A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
+    a0 = 0.5 * (r[2, 1] - r[1, 2])
+    a1 = 0.5 * (r[0, 2] - r[2, 0])
+    a2 = 0.5 * (r[1, 0] - r[0, 1])
+    factor = _log_factor(a0 * a0 + a1 * a1 + a2 * a2, 0.5 * (r[0, 0] + r[1, 1] + r[2, 2] - 1.0))
+    k0 = a0 * factor / half_length
+    k1 = a1 * factor / half_length
+    k2 = a2 * factor / half_length
+    m0 = b0 * (k0 - rest0)
+    m1 = b1 * (k1 - rest1)
+    m2 = b2 * (k2 - rest2)
+    result[6] = 0.5 * (m0 * (k0 - rest0) + m1 * (k1 - rest1) + m2 * (k2 - rest2)) * half_length
+    result[0] = g3 * m0
+    result[1] = g3 * m1
+    result[2] = g3 * m2
+    result[3] = half_length * (k1 * result[2] - k2 * result[1])
+    result[4] = half_length * (k2 * result[0] - k0 * result[2])
+    result[5] = half_length * (k0 * result[1] - k1 * result[0])
 
 
 @njit(cache=True, fastmath=_FASTMATH)
@@ -284,12 +324,7 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         a2 = 0.5 * (r10 - r01)
         s2 = a0 * a0 + a1 * a1 + a2 * a2  # sin²θ
         cos_th = 0.5 * (r00 + r11 + r22 - 1.0)
-        if s2 < 2.5e-3 and cos_th > 0.0:
-            # θ/sinθ as a series in sinθ (asin(s)/s); truncation error < 1e-14 for s < 0.05
-            factor = 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * 35.0 / 1152.0)))
-        else:
-            s = np.sqrt(s2)
-            factor = np.arctan2(s, cos_th) / s
+        factor = _log_factor(s2, cos_th)
         inv_d0 = 1.0 / rest_voronoi[j]
         k0 = a0 * factor * inv_d0 - rest_curvature[0, j]
         k1 = a1 * factor * inv_d0 - rest_curvature[1, j]
@@ -334,42 +369,35 @@ def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
 
 
 @njit(cache=True)
-def _apply_held(x, v, Q, w, ints, floats, start_position, end_position, start_frame, end_frame,
-                rotation_start, rotation_end, displacement, displacement_rate):
-    """Overwrite held positions, frames and velocities: prescribed motions are exact."""
+def _apply_held(x, v, ints, floats, start_position, end_position, displacement, displacement_rate):
+    """Overwrite held node positions and velocities: prescribed motions are exact."""
     n = x.shape[1] - 1
-    axis = floats[F_AXIS:F_AXIS + 3]
     for c in range(3):
         if ints[I_START_HELD + c]:
             x[c, 0] = start_position[c]
             v[c, 0] = 0.0
         if ints[I_END_HELD + c]:
-            x[c, n] = end_position[c] + displacement * axis[c]
-            v[c, n] = displacement_rate * axis[c]
-    if ints[I_START_FRAME_HELD]:
-        _set_rotated_frame(Q, 0, start_frame, axis, rotation_start)
-        for c in range(3):
-            w[c, 0] = 0.0
-    if ints[I_END_FRAME_HELD]:
-        _set_rotated_frame(Q, n - 1, end_frame, axis, rotation_end)
-        for c in range(3):
-            w[c, n - 1] = 0.0
+            x[c, n] = end_position[c] + displacement * floats[F_AXIS + c]
+            v[c, n] = displacement_rate * floats[F_AXIS + c]
 
 
 @njit(cache=True)
-def _hold_velocities(v, w, ints, floats, displacement_rate):
+def _drag_factors(nu_dt):
+    """(e^{−x}, (1 − e^{−x})/x) for x = ν·dt, with the series near 0."""
+    if nu_dt < 1e-6:
+        return 1.0 - nu_dt, 1.0 - 0.5 * nu_dt
+    decay = np.exp(-nu_dt)
+    return decay, (1.0 - decay) / nu_dt
+
+
+@njit(cache=True)
+def _hold_velocities(v, ints, floats, displacement_rate):
     n = v.shape[1] - 1
     for c in range(3):
         if ints[I_START_HELD + c]:
             v[c, 0] = 0.0
         if ints[I_END_HELD + c]:
             v[c, n] = displacement_rate * floats[F_AXIS + c]
-    if ints[I_START_FRAME_HELD]:
-        for c in range(3):
-            w[c, 0] = 0.0
-    if ints[I_END_FRAME_HELD]:
-        for c in range(3):
-            w[c, n - 1] = 0.0
 
 
 @njit(cache=True, fastmath=_FASTMATH)
@@ -398,8 +426,15 @@ def advance(x, v, Q, w, t_start, n_steps,
     axis = floats[F_AXIS:F_AXIS + 3].copy()
     force_dir = floats[F_FORCE_DIRECTION:F_FORCE_DIRECTION + 3].copy()
     gravity = floats[F_GRAVITY:F_GRAVITY + 3].copy()
-    decay = np.exp(-floats[F_DAMPING] * dt)
-    decay_rotation = np.exp(-floats[F_DAMPING_ROTATION] * dt)
+    # Linear drag integrated exactly over a step (integrating factor): v' = a − νv gives
+    # v ← v·e^{−νdt} + a·dt·(1 − e^{−νdt})/(νdt). Stable for any ν, and right in the
+    # overdamped limit νdt ≫ 1 (velocity a/ν), where multiplying by e^{−νdt} alone stalls.
+    decay, gain = _drag_factors(floats[F_DAMPING] * dt)
+    decay_rotation = np.empty(3)
+    gain_rotation = np.empty(3)
+    decay_rotation[0], gain_rotation[0] = _drag_factors(floats[F_DAMPING_ROTATION] * dt)
+    decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
+    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * floats[F_DAMPING_ROTATION] * dt)
     friction = floats[F_FRICTION]
     slip_speed = floats[F_SLIP_SPEED]
     skin = floats[F_SKIN]
@@ -432,6 +467,9 @@ def advance(x, v, Q, w, t_start, n_steps,
     kinetic = np.inf
     held_start_frame = ints[I_START_FRAME_HELD] != 0
     held_end_frame = ints[I_END_FRAME_HELD] != 0
+    clamp = np.empty((3, 3))
+    couple = np.empty(7)
+    kinetic_before = 0.0
 
     t = t_start
     rows = 0
@@ -455,15 +493,43 @@ def advance(x, v, Q, w, t_start, n_steps,
         f_radius = table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t_half)
         local_twist = table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t_half)
         local_pull = table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t_half)
-        _apply_held(x, v, Q, w, ints, floats, start_position, end_position, start_frame, end_frame,
-                    rot_start, rot_end, disp, disp_rate)
+        _apply_held(x, v, ints, floats, start_position, end_position, disp, disp_rate)
 
         # Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r (a·κ3⁰ fixed).
         r2 = f_radius * f_radius
+        fb = f_stiff * r2 * r2
+        f_radius_inv = 1.0 / f_radius
         internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
-                       f_stiff * r2, f_stiff * r2 * r2, r2 * r2, 1.0 / f_radius, local_twist,
+                       f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
                        force, torque, dilatation, lengths, energies)
+        # Held frames are clamps at the rod's ends, half an element from the end elements'
+        # centres: a bending/twisting spring over that half element (second order at the
+        # boundary, and the twist put in spans the whole rest length L0).
+        clamp_torque = 0.0
+        if held_start_frame:
+            rotated_frame(start_frame, axis, rot_start, clamp)
+            e0 = dilatation[0]
+            _clamp_couple(clamp, Q[:, :, 0], 0.5 * rest_length[0], rest_curvature[0, 0],
+                          rest_curvature[1, 0], f_radius_inv * rest_curvature[2, 0],
+                          fb * bend_stiffness[0, 0], fb * bend_stiffness[1, 0], fb * bend_stiffness[2, 0],
+                          1.0 / (e0 * e0 * e0) if incompressible else 1.0, couple)
+            for c in range(3):
+                torque[c, 0] += couple[3 + c] - couple[c]
+            energies[1] += couple[6]
+        if held_end_frame:
+            rotated_frame(end_frame, axis, rot_end, clamp)
+            e1 = dilatation[n - 1]
+            _clamp_couple(Q[:, :, n - 1], clamp, 0.5 * rest_length[n - 1], rest_curvature[0, n - 2],
+                          rest_curvature[1, n - 2], f_radius_inv * rest_curvature[2, n - 2],
+                          fb * bend_stiffness[0, n - 2], fb * bend_stiffness[1, n - 2],
+                          fb * bend_stiffness[2, n - 2], 1.0 / (e1 * e1 * e1) if incompressible else 1.0,
+                          couple)
+            for c in range(3):
+                torque[c, n - 1] += couple[c] + couple[3 + c]
+                clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
+                                 + Q[2, c, n - 1] * couple[2]) * axis[c]
+            energies[1] += couple[6]
 
         if contact_on:
             _radii(rest_radius, dilatation, f_radius, incompressible, radius)
@@ -526,20 +592,31 @@ def advance(x, v, Q, w, t_start, n_steps,
                 force[1, seg_last] -= p * d1
                 force[2, seg_last] -= p * d2
 
-        # kick
-        for c in range(3):
-            for i in range(n + 1):
-                v[c, i] = (v[c, i] + dt * force[c, i] * inv_mass[i] / r2) * decay
-        for c in range(3):
-            for i in range(n):
-                gi = dilatation[i] if incompressible else 1.0
-                w[c, i] = (w[c, i] + dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2)) * decay_rotation
-        _hold_velocities(v, w, ints, floats, disp_rate)
-
         t_next = t + dt
         last = step == n_steps - 1
         check = (step + 1) % check_every == 0 or last
         record = (step + 1) % history_every == 0 or last
+        if record:
+            # kinetic energy at t (before the kick); averaged with the one after it, it sits at
+            # t + dt/2 with the potential energy, so the recorded total is second-order accurate
+            kinetic_before = 0.0
+            for i in range(n + 1):
+                kinetic_before += 0.5 * node_mass[i] * r2 * (v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
+            for i in range(n):
+                for c in range(3):
+                    kinetic_before += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+
+        # kick
+        for c in range(3):
+            for i in range(n + 1):
+                v[c, i] = v[c, i] * decay + gain * dt * force[c, i] * inv_mass[i] / r2
+        for c in range(3):
+            for i in range(n):
+                gi = dilatation[i] if incompressible else 1.0
+                w[c, i] = (w[c, i] * decay_rotation[c]
+                           + gain_rotation[c] * dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2))
+        _hold_velocities(v, ints, floats, disp_rate)
+
         if check or record:
             # Residual: largest nodal force and element torque / length on free degrees of freedom.
             res = 0.0
@@ -567,8 +644,6 @@ def advance(x, v, Q, w, t_start, n_steps,
             if status != S_COMPLETED:
                 break
             for i in range(n):
-                if (i == 0 and held_start_frame) or (i == n - 1 and held_end_frame):
-                    continue
                 tm = 0.0
                 for c in range(3):
                     tm += torque[c, i] * torque[c, i]
@@ -595,11 +670,6 @@ def advance(x, v, Q, w, t_start, n_steps,
                 rod_on_end = 0.0
                 for c in range(3):
                     rod_on_end += (force[c, n] - end_force * force_dir[c]) * axis[c]
-                # axial torque the outside exerts on the end element, in the lab frame
-                torque_axial = 0.0
-                for c in range(3):
-                    torque_axial += (Q[0, c, n - 1] * torque[0, n - 1] + Q[1, c, n - 1] * torque[1, n - 1]
-                                     + Q[2, c, n - 1] * torque[2, n - 1]) * axis[c]
                 end_disp = 0.0
                 for c in range(3):
                     end_disp += (snap_x[rows, c, n] - end_position[c]) * axis[c]
@@ -607,12 +677,12 @@ def advance(x, v, Q, w, t_start, n_steps,
                 history[rows, H_END_ROTATION] = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION],
                                                             table_n[T_END_ROTATION], t_next)
                 history[rows, H_END_FORCE] = -rod_on_end
-                history[rows, H_END_TORQUE] = -torque_axial
+                history[rows, H_END_TORQUE] = clamp_torque
                 history[rows, H_END_DISPLACEMENT] = end_disp
                 history[rows, H_APPLIED_FORCE] = end_force
                 history[rows, H_STRETCH_ENERGY] = energies[0]
                 history[rows, H_BEND_ENERGY] = energies[1]
-                history[rows, H_KINETIC_ENERGY] = kin
+                history[rows, H_KINETIC_ENERGY] = 0.5 * (kin + kinetic_before)
                 history[rows, H_CONTACTS] = touching
                 history[rows, H_PENETRATION] = worst
                 history[rows, H_RESIDUAL] = residual
@@ -641,11 +711,8 @@ def advance(x, v, Q, w, t_start, n_steps,
             break
 
     if status == S_COMPLETED or status == S_EQUILIBRIUM:
-        rot_end = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t)
-        rot_start = table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t)
         disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t)
-        _apply_held(x, v, Q, w, ints, floats, start_position, end_position, start_frame, end_frame,
-                    rot_start, rot_end, disp, 0.0)
+        _apply_held(x, v, ints, floats, start_position, end_position, disp, 0.0)
     info[D_MAX_PENETRATION] = max_penetration
     info[D_REBUILDS] = rebuilds
     info[D_MAX_PAIRS] = max_pairs

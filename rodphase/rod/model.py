@@ -145,8 +145,13 @@ class Solver:
 
     dt: float | None = None
     safety: float = 0.5
-    damping: float = 2.0  # 1/s; velocities decay as exp(-damping·t) without forces
-    rotational_damping: float | None = None  # 1/s; None = same as damping
+    damping: float = 20.0  # 1/s; velocities decay as exp(-damping·t) without forces
+    # 1/s about d1 and d2, half of it about d3. None = 40·c_G/L0 with c_G = √(G/ρ): the
+    # lowest twist modes are overdamped (about 3x critical) so stored twist cannot snap into
+    # a loop faster than contact can catch it, while twist still spreads over the rod in
+    # L0²/(π²·2G/(ρν)) ≈ 0.1 s for the paper's rod. (PyElastica's matched 4·damping/a² is
+    # far heavier: twist then piles up at a turning end.)
+    rotational_damping: float | None = None
     history_interval: float = 0.05  # s between history rows
     check_interval: int = 50  # steps between guard and equilibrium checks
     tolerance: float = 1e-4  # equilibrium: residual force / force scale
@@ -165,6 +170,7 @@ class Stage:
     until_equilibrium: bool = False
     label: str = ""
     controls: Controls | None = None
+    ends: Ends | None = None  # replaces the problem's ends; held places are taken at the stage start
 
 
 @dataclass
@@ -266,3 +272,4 @@ class Problem:
     stages: tuple[Stage, ...] = (Stage(1.0),)
     force_scale: float | None = None  # N; default max(|end force|, F_C)
     name: str = ""
+    rest_curvature: np.ndarray | None = None  # (n-1, 3), added to rod.rest_curvature

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..result import HISTORY_COLUMNS, RunResult
 from . import kernel as k
-from .model import Controls, Problem, RodState, Table, stable_time_step
+from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
 _GUARD_NAMES = {
     k.S_NAN: "non-finite state (NaN or inf)",
@@ -75,6 +75,11 @@ def _rod_arrays(problem: Problem):
     bend[0] = bend[1] = rod.youngs_modulus * i1
     bend[2] = rod.shear_modulus * 2 * i1
     curvature = np.tile(np.asarray(rod.rest_curvature, float)[:, None], (1, n - 1))
+    if problem.rest_curvature is not None:
+        extra = np.asarray(problem.rest_curvature, float)
+        if extra.shape != (n - 1, 3):
+            raise ValueError(f"rest_curvature must be ({n - 1}, 3); got {extra.shape}")
+        curvature = curvature + extra.T
     rest_shear = np.zeros((3, n))
     rest_radius = np.full(n, rod.radius)
     c = problem.contact
@@ -86,9 +91,9 @@ def _rod_arrays(problem: Problem):
                 contact_c=contact_c)
 
 
-def _settings(problem: Problem, dt: float, history_every: int, until_equilibrium: bool,
-              equilibrium_after: float, controls: Controls):
-    rod, ends, contact, solver = problem.rod, problem.ends, problem.contact, problem.solver
+def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
+              until_equilibrium: bool, equilibrium_after: float, controls: Controls):
+    rod, contact, solver = problem.rod, problem.contact, problem.solver
     ints = np.zeros(k.N_INTS, dtype=np.int64)
     ints[k.I_INCOMPRESSIBLE] = rod.incompressible
     ints[k.I_CONTACT] = contact.enabled
@@ -104,7 +109,8 @@ def _settings(problem: Problem, dt: float, history_every: int, until_equilibrium
     floats = np.zeros(k.N_FLOATS)
     floats[k.F_DT] = dt
     floats[k.F_DAMPING] = solver.damping
-    floats[k.F_DAMPING_ROTATION] = (solver.damping if solver.rotational_damping is None
+    floats[k.F_DAMPING_ROTATION] = (rotational_damping_auto(rod)
+                                    if solver.rotational_damping is None
                                     else solver.rotational_damping)
     floats[k.F_FRICTION] = contact.friction
     floats[k.F_SLIP_SPEED] = contact.slip_speed
@@ -122,6 +128,31 @@ def _settings(problem: Problem, dt: float, history_every: int, until_equilibrium
     floats[k.F_GRAVITY:k.F_GRAVITY + 3] = controls.gravity
     floats[k.F_EQUILIBRIUM_AFTER] = equilibrium_after
     return ints, floats
+
+
+def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:
+    """Frames at the two rod ends, half an element beyond the end elements' centres.
+
+    Extrapolated with the rotation between the two outermost elements at each end, so a
+    uniformly bent or twisted initial rod is clamped without a jump (exact for a helix).
+    """
+    from scipy.spatial.transform import Rotation
+
+    Q = state.Q
+    n = Q.shape[2]
+    if n < 2:
+        return Q[:, :, 0].copy(), Q[:, :, -1].copy()
+    # Q_{j+1} = exp(−[θ]) Q_j with exp([θ]) = Q_j Q_{j+1}ᵀ
+    theta0 = Rotation.from_matrix(Q[:, :, 0] @ Q[:, :, 1].T).as_rotvec()
+    theta1 = Rotation.from_matrix(Q[:, :, n - 2] @ Q[:, :, n - 1].T).as_rotvec()
+    start = Rotation.from_rotvec(0.5 * theta0).as_matrix() @ Q[:, :, 0]
+    end = Rotation.from_rotvec(-0.5 * theta1).as_matrix() @ Q[:, :, n - 1]
+    return start, end
+
+
+def rotational_damping_auto(rod) -> float:
+    """40·√(G/ρ)/L0 [1/s]: see Solver.rotational_damping."""
+    return 40.0 * math.sqrt(rod.shear_modulus / rod.density) / rod.length
 
 
 def force_scale(problem: Problem) -> float:
@@ -163,10 +194,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     history_every = max(1, int(round(problem.solver.history_interval / dt)))
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
-    start_position = state.x[:, 0].copy()
-    end_position = state.x[:, n].copy()
-    start_frame = state.Q[:, :, 0].copy()
-    end_frame = state.Q[:, :, n - 1].copy()
+    initial_end = state.x[:, n].copy()
+    start_frame, end_frame = clamp_frames(state)
 
     rows_h, rows_x, rows_d, stage_ids, stage_ends = [], [], [], [], []
     info = np.zeros(k.N_INFO)
@@ -179,13 +208,20 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     wall0 = time.perf_counter()
     budget = max_steps if max_steps is not None else np.iinfo(np.int64).max
     for index, stage in enumerate(problem.stages):
-        controls = stage.controls if stage.controls is not None else problem.controls
+        # A stage's own controls run on the stage clock; the problem's on the run clock.
+        own = stage.controls is not None
+        controls = stage.controls if own else problem.controls
         t0 = state.time
+        shift = t0 if own else 0.0
         tables = controls.tables()
-        last_break = max(max(tb[0]) for tb in tables)
-        ints, floats = _settings(problem, dt, history_every, stage.until_equilibrium,
-                                 t0 + last_break, controls)
-        table_t, table_v, table_n = _table_arrays(tables, t0)
+        settled = shift + max(max(tb[0]) for tb in tables)
+        ends = stage.ends if stage.ends is not None else problem.ends
+        ints, floats = _settings(problem, ends, dt, history_every, stage.until_equilibrium,
+                                 settled, controls)
+        # held components stay where the stage finds them (plus the displacement control)
+        start_position = state.x[:, 0].copy()
+        end_position = state.x[:, n].copy()
+        table_t, table_v, table_n = _table_arrays(tables, shift)
         n_steps = int(math.ceil(stage.duration / dt - 1e-9))
         n_steps = min(n_steps, budget - steps_total)
         if n_steps <= 0:
@@ -206,6 +242,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         rebuilds += int(info[k.D_REBUILDS])
         max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
         max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
+        axis = floats[k.F_AXIS:k.F_AXIS + 3]
+        hist[:rows, k.H_END_DISPLACEMENT] += (end_position - initial_end) @ axis
         rows_h.append(hist[:rows])
         rows_x.append(snap_x[:rows])
         rows_d.append(snap_d[:rows])

@@ -1,0 +1,231 @@
+"""The rodphase command line: parse, call, report. No physics here.
+
+Exit status: 0 success, 1 some runs failed (unstable / not converged / error), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+
+import click
+
+from . import __version__
+from . import config as C
+
+SET_HELP = ("Override any config value, repeatable: --set rod.elements=60 --set "
+            "loading.twist_density=1.2 (sweep keys: --set sweep.samples=40). Units are the "
+            "config's: m, s, Pa, N, turns/s.")
+
+
+def reports_errors(func):
+    """Bad input → 'error: key: value (allowed: ...)' on stderr, exit 2, no traceback."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from .store import StoreMismatch
+
+        try:
+            return func(*args, **kwargs)
+        except C.ConfigError as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+        except StoreMismatch as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+        except (FileNotFoundError, KeyError) as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+
+    return wrapper
+
+
+def _clear(output: str, force: bool) -> None:
+    if force and Path(output).exists():
+        Path(output).unlink()
+
+
+def _overrides(items) -> list:
+    return [C.parse_override(item) for item in items]
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="rodphase")
+def main():
+    """Shapes of stretched and twisted soft filaments: simulate, classify, map phases.
+
+    A scene is one experiment (YAML); a sweep samples a scene over twist density Φa and
+    extension L/L0 and writes every run to one HDF5 file, which `classify` labels
+    (straight, plectoneme, solenoid, mixed) and `plot` draws.
+    """
+
+
+@main.command()
+@click.argument("scene")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="HDF5 file to write (created, or resumed if it holds the same config).")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option("--force", is_flag=True, help="Overwrite OUTPUT if it holds another config.")
+@reports_errors
+def run(scene, output, sets, force):
+    """Run one SCENE (a YAML file or a shipped scene name, see `rodphase scenes`)."""
+    from .scenes import SCENES
+    from .store import open_store
+    from .sweep import run_scene
+    from .tabulate import classify_store
+
+    cfg = C.load_scene(scene, _overrides(sets), SCENES)
+    _clear(output, force)
+    click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
+    result = run_scene(cfg.plain())
+    with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
+                    version=__version__, kind="run") as store:
+        store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
+        table = classify_store(store)
+    d = result.diagnostics
+    click.echo(f"{result.status}: {result.message}")
+    click.echo(f"{d['steps']} steps of {d['dt']:.3g} s in {d['wall_time']:.1f} s "
+               f"({d['us_per_step']:.1f} µs/step); written to {output}")
+    row = table.iloc[0]
+    parts = [f"phase {row['phase']}", f"alignment {row['alignment']:.2f}"]
+    for key in ("link", "twist", "writhe"):
+        if key in row:
+            parts.append(f"{key} {row[key]:.3f}")
+    click.echo(", ".join(parts))
+    sys.exit(0 if result.ok else 1)
+
+
+@main.command()
+@click.argument("sweep_file", metavar="SWEEP.yaml", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="HDF5 file; rerunning into it resumes and skips finished runs.")
+@click.option("--jobs", "-j", default=2, show_default=True, type=click.IntRange(1, 4096),
+              help="Parallel workers (processes).")
+@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
+              show_default=True, help="loky: processes on this machine; dask: a Dask cluster.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Dask scheduler address (tcp://host:8786); default: a local cluster.")
+@click.option("--retry-failed", is_flag=True, help="Run again the runs that failed before.")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--force", is_flag=True, help="Overwrite OUTPUT if it holds another config.")
+@reports_errors
+def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quiet, force):
+    """Run a sweep: sample the scene over its axes and simulate every sample."""
+    from .scenes import SCENES
+    from .sweep import run_sweep
+
+    sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
+    _clear(output, force)
+    report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
+                       scheduler=scheduler, retry_failed=retry_failed, progress=not quiet,
+                       echo=click.echo)
+    click.echo(f"{report.done} ok, {report.failed} failed, {report.skipped} skipped of "
+               f"{report.total} in {report.wall:.1f} s; written to {output}")
+    for run_id, status, message in report.failures:
+        click.echo(f"  {run_id}: {status}: {message}")
+    sys.exit(0 if report.failed == 0 else 1)
+
+
+@main.command()
+@click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Also write the table as CSV.")
+@click.option("--epsilon", default=0.2, show_default=True, type=click.FloatRange(0, 10),
+              help="Contact tolerance ε: partners closer than (2+ε)·a count.")
+@click.option("--plectoneme-below", default=-0.5, show_default=True, type=float,
+              help="Alignment below this is a plectoneme.")
+@click.option("--solenoid-above", default=0.5, show_default=True, type=float,
+              help="Alignment above this is a solenoid (between: mixed).")
+@reports_errors
+def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
+    """Label every run of OUT.h5 by loop alignment and store the table back into it."""
+    import h5py
+
+    from .store import Store, write_table_csv
+    from .tabulate import classify_store
+
+    with Store(h5py.File(store_file, "r+")) as store:
+        table = classify_store(store, epsilon=epsilon, plectoneme_below=plectoneme_below,
+                               solenoid_above=solenoid_above)
+    counts = table["phase"].value_counts().to_dict()
+    click.echo(f"{len(table)} runs: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    if csv_path:
+        write_table_csv(table, csv_path)
+        click.echo(f"table written to {csv_path}")
+
+
+@main.command()
+@click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
+@click.option("--kind", type=click.Choice(["phase", "topology", "force", "shape"]), default="phase",
+              show_default=True, help="phase: Φa vs L/L0 map; topology: Lk/Tw/Wr vs Φa; force: "
+              "end force vs displacement; shape: final rod shapes.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file.")
+@click.option("--run", "run_id", default=None, help="Run id for topology/force (default: first).")
+@click.option("--experiments", type=click.Path(exists=True, dir_okay=False),
+              help="CSV of experimental points (twist_density, extension, kind) to overlay.")
+@reports_errors
+def plot(store_file, kind, output, run_id, experiments):
+    """Draw a figure from OUT.h5."""
+    import pandas as pd
+
+    from . import plot as P
+    from .store import read_store
+
+    with read_store(store_file) as store:
+        if kind == "phase":
+            table = store.table()
+            if "phase" not in table:
+                raise C.ConfigError(store_file, "not classified", "run `rodphase classify` first")
+            exp = pd.read_csv(experiments) if experiments else None
+            P.phase_map(table, output, experiments=exp)
+        elif kind == "shape":
+            ids = store.run_ids()[:12]
+            shapes = [(i, store.read_run(i).positions, store.read_run(i).rest_radius) for i in ids]
+            P.shape_grid(shapes, output)
+        else:
+            rid = run_id or store.run_ids()[0]
+            result = store.read_run(rid)
+            if kind == "topology":
+                P.topology_curves(result, output)
+            else:
+                P.force_displacement(result.history, output)
+    click.echo(f"written {output}")
+
+
+@main.command()
+@click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
+@click.option("--run", "run_id", required=True, help="Run id (see `rodphase classify`).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Movie file: .mp4 when ffmpeg is installed, else .gif.")
+@click.option("--fps", default=10, show_default=True, type=click.IntRange(1, 120))
+@reports_errors
+def movie(store_file, run_id, output, fps):
+    """Animate one run's snapshots (3D rod)."""
+    from . import plot as P
+    from .store import read_store
+
+    with read_store(store_file) as store:
+        result = store.read_run(run_id)
+    path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps)
+    click.echo(f"written {path}")
+
+
+@main.command()
+def scenes():
+    """List the shipped scenes and sweeps."""
+    import yaml
+
+    root = C.PACKAGE_CONFIGS
+    for path in sorted((root / "scenes").glob("*.yaml")) + sorted(root.glob("*.yaml")):
+        data = yaml.safe_load(path.read_text()) or {}
+        text = data.get("description") or (data.get("sweep") or {}).get("description", "")
+        if not text:
+            first = next((ln[1:].strip() for ln in path.read_text().splitlines()
+                          if ln.startswith("#")), "")
+            text = first
+        click.echo(f"{str(path.relative_to(root)):40s} {text}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,469 @@
+"""YAML → validated, frozen configuration; `--set key.path=value` overrides; unit mapping.
+
+Every error names the key's path, the value and what is allowed, and is raised as
+ConfigError (the CLI turns it into exit status 2 without a traceback).
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Any, Callable
+
+import yaml
+
+PACKAGE_CONFIGS = Path(__file__).resolve().parent / "configs"
+
+
+class ConfigError(ValueError):
+    def __init__(self, path: str, value: Any, allowed: str):
+        self.path, self.value, self.allowed = path, value, allowed
+        super().__init__(f"{path}: {value!r} (allowed: {allowed})")
+
+
+class Frozen(dict):
+    """A read-only mapping with attribute access: validated config sections."""
+
+    def __getattr__(self, name):
+        try:
+            return self[name]
+        except KeyError as exc:
+            raise AttributeError(name) from exc
+
+    def _blocked(self, *args, **kwargs):
+        raise TypeError("configuration is read-only; use --set to change it")
+
+    __setitem__ = __delitem__ = update = pop = popitem = setdefault = clear = _blocked  # type: ignore
+
+    def plain(self) -> dict:
+        def convert(v):
+            if isinstance(v, Frozen):
+                return v.plain()
+            return list(v) if isinstance(v, tuple) else v
+
+        return {k: convert(v) for k, v in self.items()}
+
+
+# ---------------------------------------------------------------- field checks
+
+Check = Callable[[str, Any], Any]
+
+
+def number(minimum: float | None = None, maximum: float | None = None, *, strict_min=False,
+           integer=False, unit: str = "", nullable=False) -> Check:
+    lo = "" if minimum is None else (f"> {minimum:g}" if strict_min else f">= {minimum:g}")
+    hi = "" if maximum is None else f"<= {maximum:g}"
+    kind = "an integer" if integer else "a number"
+    text = " ".join(s for s in (kind, lo, ("and " + hi) if lo and hi else hi) if s)
+    if unit:
+        text += f", in {unit}"
+    if nullable:
+        text += ", or null"
+
+    def check(path, value):
+        if value is None and nullable:
+            return None
+        if isinstance(value, str):
+            # PyYAML (YAML 1.1) reads 1.0e6 (no sign in the exponent) as text
+            try:
+                value = float(value)
+            except ValueError:
+                raise ConfigError(path, value, text) from None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(path, value, text)
+        if integer and not float(value).is_integer():
+            raise ConfigError(path, value, text)
+        if not math.isfinite(value):
+            raise ConfigError(path, value, text)
+        if minimum is not None and (value < minimum or (strict_min and value == minimum)):
+            raise ConfigError(path, value, text)
+        if maximum is not None and value > maximum:
+            raise ConfigError(path, value, text)
+        return int(value) if integer else float(value)
+
+    return check
+
+
+def choice(*options) -> Check:
+    def check(path, value):
+        if value not in options:
+            raise ConfigError(path, value, "one of " + ", ".join(map(str, options)))
+        return value
+
+    return check
+
+
+def boolean(path, value):
+    if not isinstance(value, bool):
+        raise ConfigError(path, value, "true or false")
+    return value
+
+
+def auto_or(inner: Check) -> Check:
+    def check(path, value):
+        return "auto" if value in ("auto", None) else inner(path, value)
+
+    return check
+
+
+def vector3(path, value):
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise ConfigError(path, value, "a list of three numbers")
+    return tuple(number()(f"{path}[{i}]", v) for i, v in enumerate(value))
+
+
+def text(path, value):
+    if not isinstance(value, str) or not value:
+        raise ConfigError(path, value, "a non-empty string")
+    return value
+
+
+def interval(minimum: float, maximum: float, unit: str) -> Check:
+    def check(path, value):
+        allowed = f"[low, high] with {minimum:g} <= low < high <= {maximum:g} ({unit})"
+        if not isinstance(value, (list, tuple)) or len(value) != 2:
+            raise ConfigError(path, value, allowed)
+        lo, hi = (number(minimum, maximum)(path, v) for v in value)
+        if not lo < hi:
+            raise ConfigError(path, value, allowed)
+        return (lo, hi)
+
+    return check
+
+
+# ---------------------------------------------------------------- scene schema
+# section → key → (check, default). A default of REQUIRED must be given by the user.
+REQUIRED = object()
+positive = number(0.0, strict_min=True)
+
+SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
+    "rod": {
+        "length": (number(0, strict_min=True, unit="m"), 1.0),
+        "radius": (number(0, strict_min=True, unit="m"), 0.025),
+        "elements": (number(4, 5000, integer=True), 100),
+        "density": (number(0, strict_min=True, unit="kg/m^3"), 1000.0),
+        "imperfection": (number(0, 1, unit="rest curvature x L0 (RMS, random)"), 1e-3),
+        "seed": (number(0, integer=True), 0),
+    },
+    "material": {
+        "youngs_modulus": (number(0, strict_min=True, unit="Pa"), 1.0e6),
+        "shear_modulus": (auto_or(number(0, strict_min=True, unit="Pa")), "auto"),
+        "incompressible": (boolean, True),
+    },
+    "ends": {
+        "start": (choice("clamped", "free"), "clamped"),
+        "end_axial": (choice("force", "displacement", "free"), "force"),
+        "end_lateral": (choice("held", "free"), "held"),
+        "end_rotation": (choice("held", "free"), "held"),
+    },
+    "loading": {
+        "force_multiple": (number(0, 1000, unit="F_C = pi^2 E I / L0^2", nullable=True), None),
+        "force": (number(0, unit="N", nullable=True), None),
+        "extension": (number(1.0, 2.0, unit="L/L0 under constant load", nullable=True), None),
+        "force_ramp_time": (number(0, unit="s"), 1.0),
+        "twist_turns": (number(unit="turns", nullable=True), None),
+        "twist_density": (number(unit="Phi*a, twist per rest length x rest radius",
+                                 nullable=True), None),
+        "twist_rate": (number(0, strict_min=True, unit="turns/s"), 0.5),
+    },
+    "physics": {
+        "self_contact": (boolean, True),
+        "friction": (number(0, 5), 0.0),
+        "gravity": (vector3, (0.0, 0.0, 0.0)),
+    },
+    "contact": {
+        "stiffness": (number(0, strict_min=True, unit="E per unit overlap per unit length"), 10.0),
+        "damping_ratio": (number(0, 10), 0.5),
+        "exclusion": (number(0, strict_min=True, unit="rest radii of arc length"), math.pi),
+        "skin": (number(0, strict_min=True, unit="rest radii"), 0.5),
+        "penetration_limit": (number(0, 2, strict_min=True, unit="overlap / radius"), 0.5),
+    },
+    "solver": {
+        "dt": (auto_or(number(0, strict_min=True, unit="s")), "auto"),
+        "safety": (number(0, 1, strict_min=True), 0.5),
+        "damping": (number(0, unit="1/s"), 20.0),
+        "rotational_damping": (auto_or(number(0, unit="1/s")), "auto"),
+        "hold_until": (choice("equilibrium", "time"), "equilibrium"),
+        "hold_tolerance": (number(0, 1, strict_min=True), 1e-3),
+        "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
+        "max_steps": (number(1, integer=True, nullable=True), None),
+    },
+    "output": {
+        "history_interval": (number(0, strict_min=True, unit="s"), 0.1),
+        "topology": (boolean, True),
+    },
+    # scene-specific sections: read only by the scenes that use them
+    "pull": {
+        "distance": (number(0, strict_min=True, unit="m"), 0.3),
+        "rate": (number(0, strict_min=True, unit="m/s"), 0.02),
+    },
+    "stiffen": {
+        "factor": (number(1, 100, strict_min=True, unit="final E / initial E"), 3.0),
+        "time": (number(0, strict_min=True, unit="s"), 20.0),
+    },
+    "muscle": {
+        "helix_radius": (number(0, strict_min=True, unit="m"), 0.03),
+        "pitch": (number(0, strict_min=True, unit="m"), 0.056),
+        "loops": (number(1, 200), 5),
+        "inserted_twist": (number(unit="turns per m of fibre"), 2.0),
+        "chirality": (choice("homochiral", "heterochiral"), "homochiral"),
+        "growth_factor": (number(1, 10, strict_min=True, unit="final radius / a0"), 2.0),
+        "growth_time": (number(0, strict_min=True, unit="s"), 10.0),
+        "load": (number(0, unit="N"), 0.0),
+    },
+    "agent": {
+        "first": (number(0, 1, unit="fraction of L0"), 0.4),
+        "last": (number(0, 1, unit="fraction of L0"), 0.6),
+        "pull_multiple": (number(0, 1000, unit="F_C"), 20.0),
+        "extra_twist_density": (number(unit="Phi*a added over the segment"), 0.0),
+        "at_twist_density": (number(unit="Phi*a when the agent acts"), 0.4),
+    },
+}
+
+SCENE_KEYS = ("scene", "description") + tuple(SCENE_SCHEMA)
+
+SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
+    "scene": (text, REQUIRED),
+    "set": (None, {}),
+    "axes": (None, REQUIRED),
+    "sampler": (choice("random", "lhs", "grid", "continuation"), "random"),
+    "samples": (number(1, 100000, integer=True), 12),
+    "seed": (number(0, integer=True), 0),
+}
+
+# sweep axes in the paper's dimensionless units and where they go in the scene
+AXES = {
+    "twist_density": (interval(-3.0, 3.0, "Phi*a"), "loading.twist_density"),
+    "extension": (interval(1.0, 2.0, "L/L0"), "loading.extension"),
+    "force_multiple": (interval(0.0, 1000.0, "F_C"), "loading.force_multiple"),
+}
+
+
+def _unknown(path: str, key: str, known) -> ConfigError:
+    close = difflib.get_close_matches(key, list(known), n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    return ConfigError(f"{path}{key}", "unknown key", "one of " + ", ".join(known) + hint)
+
+
+def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
+    """Check every key of a scene mapping and fill in defaults."""
+    if not isinstance(raw, dict):
+        raise ConfigError("(top level)", raw, "a mapping with a 'scene' key")
+    for key in raw:
+        if key not in SCENE_KEYS:
+            raise _unknown("", key, SCENE_KEYS)
+    name = raw.get("scene")
+    if registered is not None and name not in registered:
+        raise ConfigError("scene", name, "one of " + ", ".join(sorted(registered)))
+    out: dict[str, Any] = {"scene": text("scene", name),
+                           "description": raw.get("description", "")}
+    for section, fields in SCENE_SCHEMA.items():
+        given = raw.get(section) or {}
+        if not isinstance(given, dict):
+            raise ConfigError(section, given, "a mapping of " + ", ".join(fields))
+        values = {}
+        for key in given:
+            if key not in fields:
+                raise _unknown(f"{section}.", key, fields)
+        for key, (check, default) in fields.items():
+            path = f"{section}.{key}"
+            values[key] = check(path, given[key]) if key in given else default
+        out[section] = Frozen(values)
+    _check_scene_consistency(out)
+    return Frozen(out)
+
+
+def _check_scene_consistency(cfg: dict) -> None:
+    loading = cfg["loading"]
+    chosen = [k for k in ("force_multiple", "force", "extension") if loading[k] is not None]
+    if len(chosen) > 1:
+        raise ConfigError("loading." + chosen[1], loading[chosen[1]],
+                          "only one of force_multiple, force, extension")
+    if loading.twist_turns is not None and loading.twist_density is not None:
+        raise ConfigError("loading.twist_density", loading.twist_density,
+                          "only one of twist_turns, twist_density")
+    rod = cfg["rod"]
+    if rod.radius >= 0.5 * rod.length:
+        raise ConfigError("rod.radius", rod.radius, f"less than half of rod.length ({rod.length:g} m)")
+    force = load_force(cfg)
+    area = math.pi * rod.radius**2
+    if force is not None and force >= cfg["material"].youngs_modulus * area:
+        raise ConfigError("loading", force, f"a load below E*A0 = "
+                          f"{cfg['material'].youngs_modulus * area:.4g} N (the rod would stretch without bound)")
+    agent = cfg["agent"]
+    if agent.first >= agent.last:
+        raise ConfigError("agent.last", agent.last, f"greater than agent.first ({agent.first:g})")
+
+
+# ---------------------------------------------------------------- unit mapping
+
+def shear_modulus(cfg) -> float:
+    g = cfg["material"].shear_modulus
+    return 2.0 * cfg["material"].youngs_modulus / 3.0 if g == "auto" else g
+
+
+def buckling_force(cfg) -> float:
+    rod, E = cfg["rod"], cfg["material"].youngs_modulus
+    return math.pi**2 * E * math.pi * rod.radius**4 / 4.0 / rod.length**2
+
+
+def load_force(cfg) -> float | None:
+    """The constant end load [N]: F = E·A0·(1 − 1/e) for an extension e of an incompressible rod."""
+    loading, rod, E = cfg["loading"], cfg["rod"], cfg["material"].youngs_modulus
+    if loading.force is not None:
+        return loading.force
+    if loading.force_multiple is not None:
+        return loading.force_multiple * buckling_force(cfg)
+    if loading.extension is not None:
+        return E * math.pi * rod.radius**2 * (1.0 - 1.0 / loading.extension)
+    return None
+
+
+def twist_turns(cfg) -> float:
+    """End rotation [turns] from twist_turns or the dimensionless twist density Φa."""
+    loading, rod = cfg["loading"], cfg["rod"]
+    if loading.twist_turns is not None:
+        return loading.twist_turns
+    if loading.twist_density is not None:
+        return loading.twist_density * rod.length / rod.radius / (2 * math.pi)
+    return 0.0
+
+
+# ---------------------------------------------------------------- loading files
+
+def parse_override(item: str) -> tuple[str, Any]:
+    if "=" not in item:
+        raise ConfigError("--set", item, "key.path=value, e.g. rod.elements=60")
+    key, value = item.split("=", 1)
+    key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise ConfigError("--set", item, "key.path=value, e.g. rod.elements=60")
+    try:
+        parsed = yaml.safe_load(value)
+    except yaml.YAMLError as exc:
+        raise ConfigError(key, value, f"a YAML value ({exc.problem})") from None
+    return key, parsed
+
+
+def apply_overrides(data: dict, overrides: dict[str, Any] | list[tuple[str, Any]]) -> dict:
+    data = copy.deepcopy(data)
+    items = overrides.items() if isinstance(overrides, dict) else overrides
+    for key, value in items:
+        node = data
+        parts = key.split(".")
+        for i, part in enumerate(parts[:-1]):
+            nxt = node.get(part)
+            if nxt is None:
+                nxt = node[part] = {}
+            if not isinstance(nxt, dict):
+                raise ConfigError(".".join(parts[: i + 1]), nxt, "a mapping, to set a key inside it")
+            node = nxt
+        node[parts[-1]] = value
+    return data
+
+
+def read_yaml(path: str | Path) -> dict:
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError("config file", str(path), "an existing YAML file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(str(path), "invalid YAML", str(exc).splitlines()[0]) from None
+    if not isinstance(data, dict):
+        raise ConfigError(str(path), data, "a YAML mapping")
+    return data
+
+
+def resolve_scene_path(name: str, base: Path | None = None) -> Path:
+    """A scene file: a path (relative to `base`), or the name of a shipped scene."""
+    candidates = []
+    if base is not None:
+        candidates.append(base / name)
+    candidates += [Path(name), PACKAGE_CONFIGS / "scenes" / f"{name}.yaml",
+                   PACKAGE_CONFIGS / name]
+    for c in candidates:
+        if c.is_file():
+            return c
+    shipped = sorted(p.stem for p in (PACKAGE_CONFIGS / "scenes").glob("*.yaml"))
+    raise ConfigError("scene", name, "a YAML file path or a shipped scene: " + ", ".join(shipped))
+
+
+def load_scene(path: str | Path, overrides=(), registered=None) -> Frozen:
+    path = resolve_scene_path(str(path))
+    return validate_scene(apply_overrides(read_yaml(path), list(overrides)), registered)
+
+
+def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen, Frozen]:
+    """(sweep, base scene) from a sweep file. Overrides under `sweep.` go to the sweep, all
+    others to the scene (after the sweep's own `set`)."""
+    path = Path(path)
+    data = read_yaml(path)
+    sweep_over = [(k[len("sweep."):], v) for k, v in overrides if k.startswith("sweep.")]
+    scene_over = [(k, v) for k, v in overrides if not k.startswith("sweep.")]
+    if set(data) != {"sweep"}:
+        extra = sorted(set(data) - {"sweep"})
+        raise ConfigError(extra[0] if extra else "sweep", "unknown key" if extra else None,
+                          "a single top-level 'sweep' mapping")
+    raw = apply_overrides(data["sweep"] or {}, sweep_over)
+    sweep = validate_sweep(raw)
+    scene_raw = read_yaml(resolve_scene_path(sweep.scene, path.parent))
+    scene_raw = apply_overrides(scene_raw, list(sweep["set"].items()))
+    scene_raw = apply_overrides(scene_raw, scene_over)
+    for axis in sweep.axes:
+        # the axis replaces whatever the scene said about the same control
+        section, key = AXES[axis][1].split(".")
+        scene_raw.setdefault(section, {})
+        for other in {"twist_density": ("twist_turns",),
+                      "extension": ("force", "force_multiple"),
+                      "force_multiple": ("force", "extension")}[axis]:
+            scene_raw[section].pop(other, None)
+    scene = validate_scene(scene_raw, registered)
+    return sweep, scene
+
+
+def validate_sweep(raw: Any) -> Frozen:
+    if not isinstance(raw, dict):
+        raise ConfigError("sweep", raw, "a mapping")
+    for key in raw:
+        if key not in SWEEP_SCHEMA:
+            raise _unknown("sweep.", key, SWEEP_SCHEMA)
+    out = {}
+    for key, (check, default) in SWEEP_SCHEMA.items():
+        if key not in raw:
+            if default is REQUIRED:
+                raise ConfigError(f"sweep.{key}", None, "required")
+            out[key] = copy.deepcopy(default)
+        elif check is not None:
+            out[key] = check(f"sweep.{key}", raw[key])
+        else:
+            out[key] = raw[key]
+    if not isinstance(out["set"], dict):
+        raise ConfigError("sweep.set", out["set"], "a mapping of key.path: value")
+    axes = out["axes"]
+    if not isinstance(axes, dict) or not axes:
+        raise ConfigError("sweep.axes", axes, "a mapping of one or more of " + ", ".join(AXES))
+    checked = {}
+    for name, span in axes.items():
+        if name not in AXES:
+            raise _unknown("sweep.axes.", name, AXES)
+        checked[name] = AXES[name][0](f"sweep.axes.{name}", span)
+    if "extension" in checked and "force_multiple" in checked:
+        raise ConfigError("sweep.axes.force_multiple", checked["force_multiple"],
+                          "not together with extension (both set the load)")
+    out["axes"] = Frozen(checked)
+    out["set"] = Frozen(out["set"])
+    return Frozen(out)
+
+
+def config_hash(*parts: Frozen) -> str:
+    blob = json.dumps([p.plain() for p in parts], sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def to_yaml(**parts: Frozen) -> str:
+    return yaml.safe_dump({k: v.plain() for k, v in parts.items()}, sort_keys=False)

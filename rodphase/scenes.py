@@ -1,0 +1,240 @@
+"""Scenes: a validated config → a rod Problem (initial state, ends, staged controls).
+
+Scenes are data builders looked up by name in SCENES; each switches on only the physics
+its experiment needs. Orientation: the rod starts at the origin along +z; the start
+(node 0) is the clamped end, the end (node n) is loaded, pulled, twisted or free.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from . import config as C
+from .rod import Contact, Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp
+from .rod.model import state_from, straight_state
+
+TURN = 2.0 * math.pi
+
+
+def rod_from(cfg) -> Rod:
+    r, m = cfg.rod, cfg.material
+    return Rod(length=r.length, radius=r.radius, elements=r.elements, density=r.density,
+               youngs_modulus=m.youngs_modulus, shear_modulus=C.shear_modulus(cfg),
+               incompressible=m.incompressible)
+
+
+def contact_from(cfg) -> Contact:
+    c = cfg.contact
+    return Contact(enabled=cfg.physics.self_contact, stiffness=c.stiffness,
+                   damping_ratio=c.damping_ratio, friction=cfg.physics.friction,
+                   exclusion=c.exclusion, skin=c.skin, penetration_limit=c.penetration_limit)
+
+
+def solver_from(cfg) -> Solver:
+    s = cfg.solver
+    return Solver(dt=None if s.dt == "auto" else s.dt, safety=s.safety, damping=s.damping,
+                  rotational_damping=None if s.rotational_damping == "auto" else s.rotational_damping,
+                  history_interval=cfg.output.history_interval, tolerance=s.hold_tolerance)
+
+
+def ends_from(cfg) -> Ends:
+    e = cfg.ends
+    start_held = (e.start == "clamped",) * 3
+    lateral = e.end_lateral == "held"
+    return Ends(start_held=start_held, start_frame_held=e.start == "clamped",
+                end_held=(lateral, lateral, e.end_axial == "displacement"),
+                end_frame_held=e.end_rotation == "held")
+
+
+def imperfection(cfg, rod: Rod) -> np.ndarray:
+    """(n-1, 3) random rest curvature (κ1, κ2 only), RMS = rod.imperfection / L0, seeded.
+
+    A perfectly straight rod is an equilibrium at any twist; real filaments are not perfect,
+    and with damping an initial kick alone decays before a slow instability grows. A frozen-in
+    imperfection makes the bifurcation imperfect and the onset of buckling unambiguous.
+    """
+    n = rod.elements
+    rng = np.random.default_rng(cfg.rod.seed)
+    kappa = np.zeros((n - 1, 3))
+    kappa[:, :2] = rng.standard_normal((n - 1, 2)) * cfg.rod.imperfection / rod.length / math.sqrt(2)
+    return kappa
+
+
+def hold_stage(cfg, controls: Controls, label="hold") -> Stage:
+    s = cfg.solver
+    return Stage(s.hold_max_time, until_equilibrium=s.hold_until == "equilibrium", label=label,
+                 controls=controls)
+
+
+def _problem(cfg, rod, state, stages, ends=None, rest_curvature=None, force_scale=None) -> Problem:
+    return Problem(rod=rod, state=state, ends=ends or ends_from(cfg), contact=contact_from(cfg),
+                   solver=solver_from(cfg), stages=tuple(stages), name=cfg.scene,
+                   rest_curvature=rest_curvature, force_scale=force_scale)
+
+
+def twist_stages(cfg, force: float, turns_from: float, turns_to: float, label="twist",
+                 **extra) -> Stage:
+    duration = abs(turns_to - turns_from) / cfg.loading.twist_rate
+    return Stage(duration, label=label, controls=Controls(
+        end_force=constant(force),
+        end_rotation=ramp(0.0, duration, TURN * turns_from, TURN * turns_to), **extra))
+
+
+def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
+    """Fig 2 and Fig 3: clamp, constant end load (ramped), twist the end, hold to equilibrium.
+
+    With `twist_targets` (turns, ascending), a continuation: one load ramp, then twist to
+    each target and hold there; each hold's end is one sample.
+    """
+    rod = rod_from(cfg)
+    force = C.load_force(cfg) or 0.0
+    ramp_time = cfg.loading.force_ramp_time
+    stages = [Stage(ramp_time, label="load", controls=Controls(end_force=ramp(0, ramp_time, 0, force)))]
+    targets = twist_targets if twist_targets is not None else [C.twist_turns(cfg)]
+    previous = 0.0
+    for k, turns in enumerate(targets):
+        if turns != previous:
+            stages.append(twist_stages(cfg, force, previous, turns, label=f"twist {k}"))
+        stages.append(hold_stage(cfg, Controls(end_force=constant(force),
+                                               end_rotation=constant(TURN * turns)), f"hold {k}"))
+        previous = turns
+    return _problem(cfg, rod, straight_state(rod), stages, rest_curvature=imperfection(cfg, rod))
+
+
+def solenoid_loss(cfg) -> Problem:
+    """Fig 4a: form a solenoid as in twist_under_load, then pull the end by a distance at a
+    steady rate with its rotation held; the reaction force is the result."""
+    base = twist_under_load(cfg)
+    force = C.load_force(cfg) or 0.0
+    turns = C.twist_turns(cfg)
+    duration = cfg.pull.distance / cfg.pull.rate
+    pull_ends = Ends(start_held=(True,) * 3, start_frame_held=True, end_held=(True, True, True),
+                     end_frame_held=True)
+    pull = Stage(duration, label="pull", ends=pull_ends, controls=Controls(
+        end_rotation=constant(TURN * turns), end_displacement=ramp(0, duration, 0, cfg.pull.distance)))
+    base.stages = base.stages + (pull,)
+    base.force_scale = max(force, rod_from(cfg).buckling_force)
+    return base
+
+
+def stiffening(cfg) -> Problem:
+    """Fig 4b: a solenoid under constant load; E (and G) ramp up, the end lifts in steps."""
+    base = twist_under_load(cfg)
+    force = C.load_force(cfg) or 0.0
+    turns = C.twist_turns(cfg)
+    t = cfg.stiffen.time
+    grow = Controls(end_force=constant(force), end_rotation=constant(TURN * turns),
+                    stiffness=ramp(0, t, 1.0, cfg.stiffen.factor))
+    settled = Controls(end_force=constant(force), end_rotation=constant(TURN * turns),
+                       stiffness=constant(cfg.stiffen.factor))
+    base.stages = base.stages + (Stage(t, label="stiffen", controls=grow),
+                                 hold_stage(cfg, settled, "hold stiff"))
+    return base
+
+
+def helix_state(radius: float, pitch: float, loops: float, n: int, handedness: int,
+                twist_per_length: float):
+    """Nodes (n+1, 3) and directors (n, 3, 3) of a helix along +z starting at the origin's
+    side, d3 along each segment, d1 towards the axis, then turned about d3 by the inserted
+    twist (rad per unit length). Returns (positions, directors, length)."""
+    c = pitch / TURN
+    per_loop = TURN * math.hypot(radius, c)
+    length = loops * per_loop
+    s = np.linspace(0.0, length, n + 1)
+    phi = s / math.hypot(radius, c)
+    x = np.stack([radius * np.cos(phi), handedness * radius * np.sin(phi), c * phi], axis=1)
+    x[:, 0] -= radius  # the first node on the axis line x = 0 is not needed; start at origin
+    t = np.diff(x, axis=0)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    mid = 0.5 * (phi[1:] + phi[:-1])
+    inward = -np.stack([np.cos(mid), handedness * np.sin(mid), np.zeros_like(mid)], axis=1)
+    d1 = inward - np.sum(inward * t, axis=1)[:, None] * t
+    d1 /= np.linalg.norm(d1, axis=1)[:, None]
+    d2 = np.cross(t, d1)
+    psi = twist_per_length * 0.5 * (s[1:] + s[:-1])
+    c_, s_ = np.cos(psi)[:, None], np.sin(psi)[:, None]
+    directors = np.stack([c_ * d1 + s_ * d2, -s_ * d1 + c_ * d2, t], axis=1)
+    return x, directors, length
+
+
+def measured_curvature(directors: np.ndarray, rest_lengths: np.ndarray) -> np.ndarray:
+    """(n-1, 3) curvature of a frame sequence, log(Q_j Q_{j+1}ᵀ)/D0: "annealing" a shape."""
+    rel = np.einsum("jab,jcb->jac", directors[:-1], directors[1:])
+    d0 = 0.5 * (rest_lengths[1:] + rest_lengths[:-1])
+    return Rotation.from_matrix(rel).as_rotvec() / d0[:, None]
+
+
+def muscle(cfg) -> Problem:
+    """Fig 4c: a twisted fibre annealed into a coil with gaps (rest shape = the coil), then
+    its radius grows with a·κ3⁰ kept constant; homochiral coils contract, heterochiral ones
+    elongate. The free end may carry a load along the coil axis."""
+    m = cfg.muscle
+    handedness = 1
+    twist_sign = 1 if m.chirality == "homochiral" else -1
+    twist = twist_sign * TURN * m.inserted_twist
+    n = cfg.rod.elements
+    x, d, length = helix_state(m.helix_radius, m.pitch, m.loops, n, handedness, twist)
+    r = cfg.rod
+    rod = Rod(length=length, radius=r.radius, elements=n, density=r.density,
+              youngs_modulus=cfg.material.youngs_modulus, shear_modulus=C.shear_modulus(cfg),
+              incompressible=cfg.material.incompressible)
+    kappa = measured_curvature(d, np.full(n, length / n))
+    axis = (0.0, 0.0, 1.0)
+    ends = Ends(start_held=(True,) * 3, start_frame_held=True, end_held=(False,) * 3,
+                end_frame_held=False, axis=axis)
+    t = m.growth_time
+    grow = Controls(end_force=constant(m.load), radius=ramp(0, t, 1.0, m.growth_factor))
+    settled = Controls(end_force=constant(m.load), radius=constant(m.growth_factor))
+    stages = [Stage(1.0, label="settle", controls=Controls(end_force=ramp(0, 1.0, 0, m.load))),
+              Stage(t, label="grow", controls=grow), hold_stage(cfg, settled, "hold grown")]
+    problem = _problem(cfg, rod, state_from(x, d), stages, ends=ends, rest_curvature=kappa,
+                       force_scale=max(m.load, rod.buckling_force))
+    return problem
+
+
+def active_agent(cfg) -> Problem:
+    """Fig S9: twist a loaded rod part way, let an agent relax the tension (a pair of forces
+    pulling two points together) and/or add twist over a segment, then twist on."""
+    rod = rod_from(cfg)
+    n = rod.elements
+    force = C.load_force(cfg) or 0.0
+    a = cfg.agent
+    segment = (int(round(a.first * n)), int(round(a.last * n)))
+    pull = a.pull_multiple * rod.buckling_force
+    extra = a.extra_twist_density / rod.radius  # rad/m
+    at_turns = a.at_twist_density * rod.length / rod.radius / TURN
+    final = C.twist_turns(cfg)
+    ramp_time = cfg.loading.force_ramp_time
+    on = dict(segment=segment, local_pull=constant(pull), local_twist=constant(extra))
+    stages = [Stage(ramp_time, label="load", controls=Controls(end_force=ramp(0, ramp_time, 0, force))),
+              twist_stages(cfg, force, 0.0, at_turns, "twist to agent"),
+              Stage(1.0, label="agent on", controls=Controls(
+                  end_force=constant(force), end_rotation=constant(TURN * at_turns), segment=segment,
+                  local_pull=ramp(0, 1.0, 0, pull), local_twist=ramp(0, 1.0, 0, extra))),
+              hold_stage(cfg, Controls(end_force=constant(force), end_rotation=constant(TURN * at_turns),
+                                       **on), "hold agent"),
+              twist_stages(cfg, force, at_turns, final, "twist on", **on),
+              hold_stage(cfg, Controls(end_force=constant(force), end_rotation=constant(TURN * final),
+                                       **on), "hold")]
+    return _problem(cfg, rod, straight_state(rod), stages, rest_curvature=imperfection(cfg, rod))
+
+
+SCENES: dict[str, Callable] = {
+    "twist_under_load": twist_under_load,
+    "solenoid_loss": solenoid_loss,
+    "stiffening": stiffening,
+    "muscle": muscle,
+    "active_agent": active_agent,
+}
+
+
+def build(cfg, **kwargs) -> Problem:
+    try:
+        builder = SCENES[cfg.scene]
+    except KeyError:
+        raise C.ConfigError("scene", cfg.scene, "one of " + ", ".join(sorted(SCENES))) from None
+    return builder(cfg, **kwargs)

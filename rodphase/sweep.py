@@ -1,0 +1,229 @@
+"""Sampling, scheduling and resume: a sweep config → runs in parallel → the HDF5 store.
+
+Workers only simulate and return results; the parent process alone writes the store, one
+whole run at a time, so a killed sweep loses at most the runs in flight and rerunning the
+same command resumes.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import time
+import traceback
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+
+from . import __version__
+from . import config as C
+from .result import RunResult
+
+
+# ---------------------------------------------------------------- samplers
+
+def _random(axes: dict, samples: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.random((samples, len(axes)))
+
+
+def _lhs(axes: dict, samples: int, seed: int) -> np.ndarray:
+    from scipy.stats import qmc
+
+    return qmc.LatinHypercube(d=len(axes), seed=np.random.default_rng(seed)).random(samples)
+
+
+def _grid(axes: dict, samples: int, seed: int) -> np.ndarray:
+    per_axis = max(1, math.ceil(samples ** (1.0 / len(axes)) - 1e-9))
+    ticks = np.linspace(0.0, 1.0, per_axis) if per_axis > 1 else np.array([0.5])
+    return np.array(list(itertools.product(ticks, repeat=len(axes))))
+
+
+SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "grid": _grid,
+                                 "continuation": _grid}
+
+
+def sample_points(sweep) -> list[dict[str, float]]:
+    """The sweep's samples in the axes' own units, in a fixed order (same seed → same list)."""
+    names = list(sweep.axes)
+    try:
+        unit = SAMPLERS[sweep.sampler](sweep.axes, sweep.samples, sweep.seed)
+    except KeyError:
+        raise C.ConfigError("sweep.sampler", sweep.sampler, "one of " + ", ".join(SAMPLERS)) from None
+    points = []
+    for row in unit:
+        point = {}
+        for name, u in zip(names, row):
+            lo, hi = sweep.axes[name]
+            point[name] = float(lo + u * (hi - lo))
+        points.append(point)
+    return points
+
+
+def scene_for(scene, point: dict[str, float]):
+    """The base scene with one sample's axis values written into it, validated again."""
+    overrides = [(C.AXES[name][1], value) for name, value in point.items()]
+    return C.validate_scene(C.apply_overrides(scene.plain(), overrides))
+
+
+# ---------------------------------------------------------------- jobs
+
+@dataclass
+class Job:
+    run_id: str
+    params: dict
+    scene: dict  # plain, validated scene for this sample
+
+
+@contextmanager
+def single_threaded_numba():
+    """One level of parallelism: the pool owns the cores, numba uses one thread per worker."""
+    import numba
+
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)
+
+
+def run_scene(scene_plain: dict, *, topology: bool | None = None) -> RunResult:
+    """Build and simulate one scene (a plain validated dict). Never raises for a failed run:
+    a run that goes unstable comes back with that status."""
+    from .rod import simulate
+    from .scenes import SCENES, build
+
+    cfg = C.validate_scene(scene_plain, SCENES)
+    problem = build(cfg)
+    want_topology = cfg.output.topology if topology is None else topology
+    return simulate(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
+
+
+def execute(job: Job) -> tuple[str, dict, RunResult | None, str]:
+    """Worker entry point: (run_id, params, result or None, error text)."""
+    with single_threaded_numba():
+        try:
+            return job.run_id, job.params, run_scene(job.scene), ""
+        except Exception:  # a bug, not a physical failure: keep the sweep going, record it
+            return job.run_id, job.params, None, traceback.format_exc(limit=4)
+
+
+def error_result(scene_plain: dict, message: str) -> RunResult:
+    n = scene_plain["rod"]["elements"]
+    empty = np.zeros((0,))
+    return RunResult(status="error", message=message, positions=np.zeros((n + 1, 3)),
+                     directors=np.zeros((n, 3, 3)), radii=np.zeros(n), rest_lengths=np.zeros(n),
+                     history={"time": empty}, snapshot_positions=np.zeros((0, n + 1, 3)),
+                     snapshot_d1=np.zeros((0, n, 3)), diagnostics={})
+
+
+def plan(sweep, scene) -> list[Job]:
+    """Every job of the sweep, each sample's scene checked before anything runs."""
+    jobs = []
+    for index, point in enumerate(sample_points(sweep)):
+        try:
+            cfg = scene_for(scene, point)
+        except C.ConfigError as exc:
+            raise C.ConfigError(f"sample {index} ({_describe(point)}): {exc.path}", exc.value,
+                                exc.allowed) from None
+        jobs.append(Job(run_id=f"run-{index:05d}", params=dict(point), scene=cfg.plain()))
+    return jobs
+
+
+def _describe(point: dict) -> str:
+    return ", ".join(f"{k}={v:.4g}" for k, v in point.items())
+
+
+# ---------------------------------------------------------------- execution
+
+@dataclass
+class SweepReport:
+    total: int
+    skipped: int
+    done: int
+    failed: int
+    wall: float
+    failures: list[tuple[str, str, str]]  # run_id, status, message
+
+
+def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "loky",
+              scheduler: str | None = None, retry_failed: bool = False,
+              progress: bool = True, echo: Callable[[str], None] = print) -> SweepReport:
+    """Run every missing sample of the sweep into the store at `out_path` (resuming)."""
+    from joblib import Parallel, delayed, parallel_config
+
+    from .store import open_store
+
+    all_jobs = plan(sweep, scene)
+    text = C.to_yaml(sweep=sweep, scene=scene)
+    digest = C.config_hash(sweep, scene)
+    with open_store(out_path, config_text=text, config_hash=digest, version=__version__,
+                    kind="sweep") as store:
+        finished = store.done_ids(include_failed=not retry_failed)
+        todo = [j for j in all_jobs if j.run_id not in finished]
+        skipped = len(all_jobs) - len(todo)
+        where = f"on Dask at {scheduler}" if backend == "dask" and scheduler else (
+            "on a local Dask cluster" if backend == "dask" else "locally")
+        echo(f"Launching {len(todo)} of {len(all_jobs)} runs {where} with {jobs} worker(s)"
+             + (f"; {skipped} already in {out_path}" if skipped else ""))
+        failures: list[tuple[str, str, str]] = []
+        done = 0
+        start = time.perf_counter()
+        bar = _progress(len(todo), progress)
+        with _backend(backend, scheduler, jobs) as config:
+            with parallel_config(**config):
+                results = Parallel(return_as="generator_unordered")(
+                    delayed(execute)(job) for job in todo)
+                scene_of = {j.run_id: j.scene for j in todo}
+                for run_id, params, result, error in results:
+                    if result is None:
+                        result = error_result(scene_of[run_id], error)
+                    store.write_run(run_id, params, result,
+                                    {"wall_time": result.diagnostics.get("wall_time", 0.0)})
+                    if result.ok:
+                        done += 1
+                    else:
+                        failures.append((run_id, result.status, result.message.splitlines()[-1]
+                                         if result.message else ""))
+                    bar.update(1)
+                    bar.set_postfix(done=done, failed=len(failures))
+        bar.close()
+        wall = time.perf_counter() - start
+    return SweepReport(len(all_jobs), skipped, done, len(failures), wall, failures)
+
+
+def _progress(total: int, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, disable=not enabled or total == 0, unit="run", dynamic_ncols=True)
+
+
+@contextmanager
+def _backend(backend: str, scheduler: str | None, jobs: int) -> Iterator[dict]:
+    if backend == "loky":
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # inherited by the workers
+        yield {"backend": "loky", "n_jobs": jobs}
+        return
+    if backend != "dask":
+        raise C.ConfigError("--backend", backend, "loky or dask")
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise C.ConfigError("--backend", "dask", "installed first: pip install 'rodphase[dask]'") from None
+    if scheduler:
+        client = Client(scheduler)
+        cluster = None
+    else:
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None)
+        client = Client(cluster)
+    try:
+        yield {"backend": "dask", "n_jobs": -1}
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

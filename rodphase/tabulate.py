@@ -1,0 +1,42 @@
+"""Store → per-run table: final shape classified by loop alignment, topology, extension."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .classify import alignment, phase
+
+
+def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5) -> dict:
+    """One row of the table from a RunResult (ok or not)."""
+    d = result.diagnostics
+    rest_length = float(d.get("rest_length", np.nan))
+    radius = float(d.get("rest_radius", np.nan))
+    row = {"status": result.status, "wall_time": float(d.get("wall_time", np.nan)),
+           "steps": int(d.get("steps", 0))}
+    if result.status == "error" or not len(result.history.get("time", [])):
+        return row | {"alignment": np.nan, "phase": "failed"}
+    value = alignment(result.positions, radius, rest_length=rest_length, epsilon=epsilon)
+    row["alignment"] = value
+    row["phase"] = phase(value, plectoneme_below, solenoid_above) if result.ok else "failed"
+    h = result.history
+    row["end_rotation_turns"] = float(h["end_rotation"][-1] / (2 * np.pi))
+    row["final_extension"] = float((rest_length + h["end_displacement"][-1]) / rest_length)
+    row["end_force"] = float(h["end_force"][-1])
+    for key in ("link", "twist", "writhe"):
+        if key in h:
+            row[key] = float(h[key][-1])
+    return row
+
+
+def classify_store(store, **thresholds) -> pd.DataFrame:
+    """Classify every run of an open store and write the table back into it."""
+    rows = []
+    for run_id in sorted(store.run_ids()):
+        result = store.read_run(run_id)
+        row = {"run_id": run_id} | store.run_params(run_id) | summarize(result, **thresholds)
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    store.write_classification(table)
+    return table

@@ -1,0 +1,343 @@
+"""The rod engine against analytic mechanics, invariances and conservation.
+
+Each tolerance says why it is that number. Rods are coarse and runs short so the file takes
+seconds once numba's cache is warm.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from rodphase.rod import (Contact, Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp,
+                          simulate, stable_time_step, straight_state, time_step)
+from rodphase.rod import kernel as K
+from rodphase.rod.contact import add_contact_forces, brute_force_pairs, build_pairs
+from rodphase.rod.simulate import _rod_arrays
+
+FREE = Ends(start_held=(False,) * 3, start_frame_held=False)
+
+
+def relax(problem, until=60.0):
+    problem.stages = (Stage(until, until_equilibrium=True),)
+    return simulate(problem)
+
+
+def test_static_stretch_of_an_incompressible_rod():
+    # The discrete rod under an end force is uniformly stretched and the discrete law is the
+    # continuum one, F = E A0 (1 - 1/e); the 0.5 % of the issue is far above what equilibrium
+    # at tolerance 1e-6 leaves (~1e-6), so a wrong factor of e anywhere fails it.
+    rod = Rod(length=1.0, radius=0.025, elements=20)
+    for fraction in (0.1, 0.3):
+        force = fraction * rod.youngs_modulus * rod.area
+        problem = Problem(rod=rod, state=straight_state(rod),
+                          controls=Controls(end_force=ramp(0, 0.2, 0, force)),
+                          solver=Solver(damping=40.0, tolerance=1e-6))
+        result = relax(problem, 10.0)
+        assert result.ok, result.message
+        expected = 1.0 / (1.0 - fraction)
+        assert result.positions[-1, 2] / rod.length == pytest.approx(expected, rel=5e-3)
+        # incompressible: the radius follows a0 / sqrt(e)
+        assert result.radii == pytest.approx(rod.radius / math.sqrt(expected), rel=5e-3)
+        # the end force reported is the load the end carries
+        assert result.history["end_force"][-1] == pytest.approx(force, rel=1e-3)
+
+
+def cantilever_tip(n):
+    rod = Rod(length=1.0, radius=0.01, elements=n)
+    bending = rod.bending_stiffness
+    load = 3e-3 * bending  # tip deflection 1e-3 L: geometric nonlinearity ~1e-6, negligible
+    problem = Problem(rod=rod, state=straight_state(rod),
+                      controls=Controls(end_force=constant(load), force_direction=(1, 0, 0)),
+                      solver=Solver(damping=1.2, tolerance=1e-7, history_interval=10.0))
+    result = relax(problem, 100.0)
+    assert result.ok, result.message
+    shear = 4 * rod.shear_modulus * rod.area / 3
+    exact = load / (3 * bending) + load / shear  # Timoshenko with the rod's own S1
+    return result.positions[-1, 0] / exact - 1.0
+
+
+def test_cantilever_tip_deflection_converges_at_second_order():
+    # Euler-Bernoulli/Timoshenko tip deflection within 2 % (issue) at 20 elements; measured
+    # 0.09 %. The clamp is a spring over the half element beyond the first frame, so the
+    # error falls ~4x per doubling of n: we ask for > 3x (a first-order clamp gives 2x).
+    e10, e20 = cantilever_tip(10), cantilever_tip(20)
+    assert abs(e20) < 0.02
+    assert abs(e10) / abs(e20) > 3.0
+
+
+def greenhill_critical_moment(tension, length, bending):
+    """Clamped-clamped twisted rod under tension: smallest M with
+    u1 u2 sin(u1 - u2) = (u1 - u2) sin u1 sin u2, u = L (M ± √(M² − 4BT)) / (4B)."""
+
+    def f(m):
+        d = math.sqrt(max(m * m - 4 * bending * tension, 0.0))
+        u1, u2 = length * (m + d) / (4 * bending), length * (m - d) / (4 * bending)
+        # both sides vanish like u2² as T → 0; dividing by it keeps the root well conditioned
+        # (the limit is tan u1 = u1, M L / B = 8.9868)
+        return (u1 * u2 * math.sin(u1 - u2) - (u1 - u2) * math.sin(u1) * math.sin(u2)) / u2**2
+
+    lo = 2 * math.sqrt(bending * tension) * (1 + 1e-9) + 1e-9
+    grid = np.linspace(lo, lo + 40 * bending / length, 4000)
+    values = [f(m) for m in grid]
+    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+        if fa == 0 or np.sign(fa) != np.sign(fb):
+            return brentq(f, a, b)
+    raise AssertionError("no root")
+
+
+def test_greenhill_reference_values():
+    # The issue's numbers: M_c L / B = 8.9868 at T = 0 and 20.9835 at T L²/B = 100.
+    assert greenhill_critical_moment(1e-6, 1.0, 1.0) == pytest.approx(8.9868, abs=2e-3)
+    assert greenhill_critical_moment(100.0, 1.0, 1.0) == pytest.approx(20.9835, abs=2e-3)
+
+
+def lateral_growth(rod, tension, turns, stretch):
+    state = straight_state(rod, twist_turns=turns)
+    state.x[2] *= stretch  # start at the static stretch so no axial wave is excited
+    s = np.linspace(0.0, 1.0, rod.elements + 1)
+    state.v[0] = 1e-6 * np.sin(np.pi * s)
+    state.v[1] = 1e-6 * np.sin(2 * np.pi * s)
+    problem = Problem(rod=rod, state=state, ends=Ends(end_held=(True, True, False), end_frame_held=True),
+                      controls=Controls(end_force=constant(tension)),
+                      solver=Solver(damping=0.1, history_interval=0.5), stages=(Stage(12.0),))
+    result = simulate(problem)
+    lateral = np.linalg.norm(result.snapshot_positions[:, :, :2], axis=2).max(axis=1)
+    return lateral, result
+
+
+def test_greenhill_buckling_onset_within_two_percent():
+    # A twisted rod under tension T L²/B = 100 between two clamps (the loaded end slides
+    # axially) is stable at 0.98 M_c and unstable at 1.02 M_c: the onset is within the 2 %
+    # the issue asks, at 50 elements. A thin rod (a = L/100) keeps shear and stretch
+    # corrections (~0.5 %) inside that band; they are included through B_eff = B/e², L = e L0.
+    rod = Rod(length=1.0, radius=0.01, elements=50)
+    bending = rod.bending_stiffness
+    tension = 100 * bending / rod.length**2
+    stretch = 1.0 / (1.0 - tension / (rod.youngs_modulus * rod.area))
+    m_c = greenhill_critical_moment(tension, stretch * rod.length, bending / stretch**2)
+    for fraction, grows in ((0.98, False), (1.02, True)):
+        # the twist moment of the discrete rod is C κ3 / e³ with κ3 = θ / L0
+        theta = fraction * m_c * rod.length / rod.twist_stiffness * stretch**3
+        lateral, result = lateral_growth(rod, tension, theta / (2 * math.pi), stretch)
+        measured = result.history["end_torque"][1]
+        assert measured == pytest.approx(fraction * m_c, rel=2e-3)  # the moment is what we set
+        if grows:
+            assert lateral.max() > 1e-3, lateral  # from ~1e-7 to millimetres: buckled
+        else:
+            assert lateral.max() < 1e-5, lateral  # stays at the scale of the initial kick
+            assert result.ok
+
+
+def test_prescribed_end_rotation_is_applied_exactly():
+    # PyElastica's examples apply ~0.9x the asked rotation (damping after the boundary
+    # condition). Here the clamp frame is set from the table, so the twist moment after a
+    # ramp of k turns must be C (2 pi k / L0) / e³ to the accuracy of equilibrium (1e-4),
+    # independent of damping.
+    rod = Rod(length=1.0, radius=0.025, elements=30)
+    turns = 0.5
+    force = 50 * rod.buckling_force  # tension keeps it straight: 0.5 turns is far below onset
+    stretch = 1.0 / (1.0 - force / (rod.youngs_modulus * rod.area))
+    for damping in (2.0, 50.0):
+        state = straight_state(rod)
+        state.x[2] *= stretch
+        problem = Problem(rod=rod, state=state,
+                          ends=Ends(end_held=(True, True, False), end_frame_held=True),
+                          controls=Controls(end_force=constant(force),
+                                            end_rotation=ramp(0, 1.0, 0, 2 * math.pi * turns)),
+                          solver=Solver(damping=damping, tolerance=1e-6, history_interval=0.05),
+                          stages=(Stage(1.0), Stage(30.0, until_equilibrium=True)))
+        result = simulate(problem)
+        assert result.ok, result.message
+        assert result.history["end_rotation"][-1] == pytest.approx(2 * math.pi * turns, abs=1e-12)
+        expected = rod.twist_stiffness * 2 * math.pi * turns / rod.length / stretch**3
+        assert result.history["end_torque"][-1] == pytest.approx(expected, rel=1e-4)
+        # and the element frames carry exactly that twist, uniformly
+        d1 = result.directors[:, 0]
+        angles = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
+        spacing = np.diff(angles)
+        assert spacing == pytest.approx(2 * math.pi * turns / rod.elements, rel=1e-4)
+
+
+def test_energy_is_conserved_without_damping():
+    # The plain quadratic law (incompressible=False) is hyperelastic; position Verlet then
+    # keeps the energy within O(dt²) of its start, with no drift. 1e-4 relative over 1e4 steps
+    # is the issue's bound; a first-order error or a wrong torque sign gives > 1e-2.
+    rod = Rod(length=1.0, radius=0.025, elements=30, incompressible=False)
+    state = straight_state(rod)
+    s = np.linspace(0.0, 1.0, rod.elements + 1)
+    state.v[0] = 0.01 * np.sin(np.pi * s)
+    state.v[1] = 0.005 * np.sin(2 * np.pi * s)
+    state.w[2] = 0.5 * np.sin(np.pi * (np.arange(rod.elements) + 0.5) / rod.elements)
+    problem = Problem(rod=rod, state=state, ends=FREE,
+                      solver=Solver(damping=0.0, rotational_damping=0.0, safety=0.25,
+                                    history_interval=1e-9))
+    dt, _ = time_step(problem)
+    problem.stages = (Stage(10_000 * dt),)
+    result = simulate(problem)
+    h = result.history
+    energy = h["stretch_energy"] + h["bend_energy"] + h["kinetic_energy"]
+    assert len(energy) >= 10_000
+    assert abs(energy[-1] - energy[0]) / energy[0] < 1e-4
+    assert np.ptp(energy) / energy[0] < 1e-3
+
+
+def test_rod_at_rest_stays_at_rest():
+    rod = Rod(length=1.0, radius=0.025, elements=25)
+    problem = Problem(rod=rod, state=straight_state(rod, axis=(1.0, 2.0, -0.5)), ends=FREE,
+                      stages=(Stage(0.2),))
+    result = simulate(problem)
+    assert np.abs(result.positions - straight_state(rod, axis=(1.0, 2.0, -0.5)).positions).max() < 1e-12
+
+
+def bent_state(rod, seed=0, amplitude=1.0):
+    """Random strains of order `amplitude` × (0.4 shear/stretch, 0.1 rad per element)."""
+    rng = np.random.default_rng(seed)
+    state = straight_state(rod)
+    state.x += amplitude * 0.01 * rng.standard_normal(state.x.shape)
+    from scipy.spatial.transform import Rotation
+
+    for i in range(rod.elements):
+        state.Q[:, :, i] = (Rotation.from_rotvec(amplitude * 0.1 * rng.standard_normal(3)).as_matrix()
+                            @ state.Q[:, :, i])
+    state.v[:] = amplitude * 0.1 * rng.standard_normal(state.v.shape)
+    state.w[:] = amplitude * rng.standard_normal(state.w.shape)
+    return state
+
+
+def loads(problem, state):
+    a = _rod_arrays(problem)
+    n = problem.rod.elements
+    force, torque = np.zeros((3, n + 1)), np.zeros((3, n))
+    K.internal_loads(state.x, state.v, state.Q, state.w, a["rest_length"], a["rest_voronoi"],
+                     a["inertia"], a["shear_stiffness"], a["bend_stiffness"], a["rest_curvature"],
+                     a["rest_shear"], np.zeros(n - 1), True, 1.0, 1.0, 1.0, 1.0, 0.0,
+                     force, torque, np.ones(n), np.ones(n), np.zeros(2))
+    return force, torque
+
+
+def test_rigid_motion_rotates_forces_and_leaves_material_torques():
+    # Objectivity: rotating and translating the whole configuration (positions, frames and
+    # velocities) rotates the nodal forces and leaves the material-frame torques unchanged,
+    # to round-off (1e-9 relative to forces of order 1e2 N).
+    from scipy.spatial.transform import Rotation
+
+    rod = Rod(length=1.0, radius=0.025, elements=12)
+    problem = Problem(rod=rod, state=straight_state(rod))
+    state = bent_state(rod)
+    R = Rotation.from_rotvec([0.3, -1.1, 0.7]).as_matrix()
+    moved = state.copy()
+    moved.x = R @ state.x + np.array([[1.0], [-2.0], [0.5]])
+    moved.v = R @ state.v
+    moved.Q = np.einsum("rci,dc->rdi", state.Q, R)  # directors rotate: d' = R d
+    f0, t0 = loads(problem, state)
+    f1, t1 = loads(problem, moved)
+    scale = np.abs(f0).max()
+    assert np.abs(R @ f0 - f1).max() < 1e-9 * scale
+    assert np.abs(t0 - t1).max() < 1e-9 * np.abs(t0).max()
+    # internal forces are balanced (momentum conservation)
+    assert np.abs(f0.sum(axis=1)).max() < 1e-9 * scale
+
+
+def test_grid_finds_exactly_the_pairs_of_the_all_pairs_search():
+    rng = np.random.default_rng(3)
+    for n in (10, 80, 300):
+        steps = rng.standard_normal((n, 3))
+        steps /= np.linalg.norm(steps, axis=1)[:, None]
+        x = np.vstack([np.zeros(3), np.cumsum(0.01 * steps, axis=0)]).T.copy()
+        pairs, count = build_pairs(x, 3, 0.05, np.empty((2, 4), dtype=np.int64))
+        found = {(int(i), int(j)) for i, j in pairs[:, :count].T}
+        assert found == brute_force_pairs(x, 3, 0.05)
+
+
+def test_contact_force_is_a_balanced_normal_spring():
+    # Two crossing segments overlapping by delta: forces equal and opposite, along the line
+    # of closest approach, magnitude k delta (no relative velocity, so no dashpot).
+    x = np.array([[-0.5, 0.5, 0.0, 0.0], [0.0, 0.0, -0.5, 0.5], [0.0, 0.0, 0.015, 0.015]]).T
+    x = np.ascontiguousarray(np.array([[-0.5, 0, 0], [0.5, 0, 0], [0, -0.5, 0.015],
+                                       [0, 0.5, 0.015]]).T)
+    v = np.zeros_like(x)
+    radius = np.full(3, 0.01)
+    pairs = np.array([[0], [2]])
+    force = np.zeros_like(x)
+    touching, depth, _ = add_contact_forces(x, v, radius, pairs, 1, np.full(3, 1e4), np.zeros(3),
+                                            1.0, 0.0, 1e-4, force)
+    assert touching == 1 and depth == pytest.approx(0.5)
+    assert force[:, :2].sum(axis=1) == pytest.approx([0, 0, -1e4 * 0.005])
+    assert force[:, 2:].sum(axis=1) == pytest.approx([0, 0, 1e4 * 0.005])
+
+
+def test_segments_pushed_together_do_not_interpenetrate():
+    # A rod folded into a hairpin is squeezed shut by a lateral end force while its clamped
+    # arm holds: with the default contact stiffness (10 E per unit length) the overlap stays
+    # under 5 % of the radius, the issue's bound.
+    rod = Rod(length=1.0, radius=0.025, elements=60)
+    n = rod.elements
+    # hairpin: down along +z, a half circle of radius 2a, back along -z (gap 4a - 2a = 2a)
+    r_bend = 2.0 * rod.radius
+    straight = (rod.length - math.pi * r_bend) / 2
+    s = np.linspace(0, rod.length, n + 1)
+    pts = np.zeros((n + 1, 3))
+    for i, si in enumerate(s):
+        if si <= straight:
+            pts[i] = [0, 0, si]
+        elif si <= straight + math.pi * r_bend:
+            phi = (si - straight) / r_bend
+            pts[i] = [r_bend - r_bend * math.cos(phi), 0, straight + r_bend * math.sin(phi)]
+        else:
+            pts[i] = [2 * r_bend, 0, straight - (si - straight - math.pi * r_bend)]
+    t = np.diff(pts, axis=0)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    d1 = np.tile([0.0, 1.0, 0.0], (n, 1))
+    directors = np.stack([d1, np.cross(t, d1), t], axis=1)
+    from rodphase.rod import state_from
+    from rodphase.scenes import measured_curvature
+
+    state = state_from(pts, directors)
+    push = 2.0  # N towards the other arm: a line load of about 2 N over the arm's contact
+    problem = Problem(rod=rod, state=state, contact=Contact(enabled=True),
+                      controls=Controls(end_force=constant(push), force_direction=(-1, 0, 0)),
+                      rest_curvature=measured_curvature(directors, np.full(n, rod.length / n)),
+                      solver=Solver(damping=20.0, tolerance=1e-4, history_interval=0.05),
+                      stages=(Stage(10.0, until_equilibrium=True),))
+    result = simulate(problem)
+    assert result.status in ("ok", "not_converged"), result.message
+    assert result.history["contacts"].max() > 0
+    assert result.diagnostics["max_penetration"] < 0.05
+
+
+def test_a_time_step_above_the_bound_is_caught_and_recorded():
+    rod = Rod(length=1.0, radius=0.025, elements=30)
+    bound = stable_time_step(rod, Contact())
+    problem = Problem(rod=rod, state=bent_state(rod, amplitude=0.01), ends=Ends(),
+                      solver=Solver(dt=3.0 * bound, damping=0.0), stages=(Stage(2000 * 3 * bound),))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = simulate(problem)
+    assert any("above the stable bound" in str(w.message) for w in caught)
+    assert result.status == "unstable"
+    assert "dt = " in result.message and "stable bound" in result.message
+    assert result.diagnostics["dt"] == pytest.approx(3 * bound)
+    # nothing is written as if it were a result: history stops where the guard tripped
+    assert result.diagnostics["steps"] < 2000
+
+
+def test_automatic_time_step_is_stable_over_many_steps():
+    # The plain quadratic law: the incompressible law of the paper is not hyperelastic (its
+    # 1/e and 1/e³ factors do work), so without any damping large random strains can grow
+    # for physical-model reasons, which says nothing about the time step.
+    rod = Rod(length=1.0, radius=0.025, elements=40, incompressible=False)
+    # strains of a few per cent in every mode, the highest included; 2e4 steps undamped
+    problem = Problem(rod=rod, state=bent_state(rod, seed=2, amplitude=0.05), ends=FREE,
+                      solver=Solver(damping=0.0, rotational_damping=0.0))
+    dt, bound = time_step(problem)
+    assert dt == pytest.approx(0.5 * bound)
+    problem.stages = (Stage(20_000 * dt),)
+    problem.solver = Solver(damping=0.0, rotational_damping=0.0, history_interval=100 * dt)
+    result = simulate(problem)
+    assert result.ok, result.message
+    h = result.history
+    energy = h["stretch_energy"] + h["bend_energy"] + h["kinetic_energy"]
+    assert energy.max() < 1.05 * energy[0]  # bounded: no instability growing underneath
