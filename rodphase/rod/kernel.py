@@ -145,14 +145,10 @@ def rotate_frames(Q, w, scale):
         u1 = scale * w[1, i]
         u2 = scale * w[2, i]
         th2 = u0 * u0 + u1 * u1 + u2 * u2
-        if th2 < 1e-4:
-            # sinθ/θ and (1−cosθ)/θ² to θ⁴: error below 1e-16 for θ < 1e-2
-            a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
-            b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
-        else:
-            th = np.sqrt(th2)
-            a = np.sin(th) / th
-            b = (1.0 - np.cos(th)) / th2
+        # sinθ/θ and (1−cosθ)/θ² to θ⁶, branch-free: a step turns an element by ω·dt ≪ 0.1
+        # rad (truncation < 3e-14 there); a faster spin is a blow-up the speed guard stops
+        a = 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0 * (1.0 - th2 / 42.0))
+        b = 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0 * (1.0 - th2 / 56.0))
         # R = I − a[u]× + b[u]×²   (the minus: Q maps lab to material coordinates)
         r00 = 1.0 - b * (u1 * u1 + u2 * u2)
         r11 = 1.0 - b * (u0 * u0 + u2 * u2)
@@ -202,9 +198,12 @@ def rotated_frame(reference, axis, angle, out):
 @njit(cache=True, inline="always")
 def _log_factor(s2, cos_th):
     """θ/sinθ from sin²θ and cosθ, for the matrix log."""
-    if s2 < 2.5e-3 and cos_th > 0.0:
-        # asin(s)/s as a series in s = sinθ; truncation error < 1e-14 for s < 0.05
-        return 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * 35.0 / 1152.0)))
+    if s2 < 0.09 and cos_th > 0.0:
+        # asin(s)/s = Σ (2k)! / (4^k (k!)² (2k+1)) s^{2k} to k = 9: truncation < 1e-12 for
+        # s < 0.3 (θ < 17°), which covers a rod bent to a radius of 3 element lengths
+        return 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * (
+            35.0 / 1152.0 + s2 * (63.0 / 2816.0 + s2 * (231.0 / 13312.0 + s2 * (
+                143.0 / 10240.0 + s2 * (6435.0 / 557056.0 + s2 * 12155.0 / 1245184.0))))))))
     s = np.sqrt(s2)
     return np.arctan2(s, cos_th) / s
 
@@ -239,31 +238,41 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
     result[5] = half_length * (k0 * result[1] - k1 * result[0])
 
 
+N_WORK = 13  # rows of the scratch array internal_loads needs, each of length n
+
+
 @njit(cache=True, fastmath=_FASTMATH)
 def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                    bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                    f_shear, f_bend, f_inertia, f_twist, local_twist,
-                   force, torque, dilatation, lengths, energies):
+                   force, torque, dilatation, lengths, energies, work):
     """Internal forces on nodes and torques on elements (material frame), Gazzola 2018.
 
-    force (3, n+1) and torque (3, n) are overwritten. energies[0:2] receive the stretch/shear
-    and bend/twist energies (the quadratic forms of the linear law).
+    force (3, n+1) and torque (3, n) are overwritten; energies[0:2] receive the stretch/shear
+    and bend/twist energies (quadratic forms of the linear law); work is (N_WORK, n) scratch.
+    The passes are split so that each loop is branch-free and writes only its own index,
+    which lets LLVM vectorise them over the (3, n) layout.
     """
     n = rest_length.shape[0]
-    for c in range(3):
-        for i in range(n + 1):
-            force[c, i] = 0.0
-    stretch_energy = 0.0
+    inc = 1.0 if incompressible else 0.0  # branch-free switch of the 1/e, 1/e³ factors
+    nl0, nl1, nl2 = work[0], work[1], work[2]  # element internal force, lab frame
+    ka0, ka1, ka2 = work[3], work[4], work[5]  # half the skew part of R, then κ
+    sin2 = work[6]
+    cos_ = work[7]
+    factor = work[8]
+    c0, c1, c2 = work[9], work[10], work[11]  # couple / ε³ per Voronoi domain
+    density = work[12]
+
+    # elements: stretch and shear, their couple, and the rigid-body rotation terms
     for i in range(n):
         t0 = x[0, i + 1] - x[0, i]
         t1 = x[1, i + 1] - x[1, i]
         t2 = x[2, i + 1] - x[2, i]
         length = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-        l0 = rest_length[i]
-        e = length / l0
+        inv_l0 = 1.0 / rest_length[i]
+        e = length * inv_l0
         lengths[i] = length
         dilatation[i] = e
-        inv_l0 = 1.0 / l0
         qt0 = Q[0, 0, i] * t0 + Q[0, 1, i] * t1 + Q[0, 2, i] * t2
         qt1 = Q[1, 0, i] * t0 + Q[1, 1, i] * t1 + Q[1, 2, i] * t2
         qt2 = Q[2, 0, i] * t0 + Q[2, 1, i] * t1 + Q[2, 2, i] * t2
@@ -273,43 +282,41 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         n0 = f_shear * shear_stiffness[0, i] * s0
         n1 = f_shear * shear_stiffness[1, i] * s1
         n2 = f_shear * shear_stiffness[2, i] * s2
-        stretch_energy += 0.5 * (n0 * s0 + n1 * s1 + n2 * s2) * l0
-        # Incompressible: the force per current area carries 1/e (A = A0/e).
-        g = 1.0 / e if incompressible else 1.0
-        f0 = g * (Q[0, 0, i] * n0 + Q[1, 0, i] * n1 + Q[2, 0, i] * n2)
-        f1 = g * (Q[0, 1, i] * n0 + Q[1, 1, i] * n1 + Q[2, 1, i] * n2)
-        f2 = g * (Q[0, 2, i] * n0 + Q[1, 2, i] * n1 + Q[2, 2, i] * n2)
-        force[0, i] += f0
-        force[1, i] += f1
-        force[2, i] += f2
-        force[0, i + 1] -= f0
-        force[1, i + 1] -= f1
-        force[2, i + 1] -= f2
-        # shear couple (Q t × n)·g: the moment of the internal force pair about the element
-        tau0 = g * (qt1 * n2 - qt2 * n1)
-        tau1 = g * (qt2 * n0 - qt0 * n2)
-        tau2 = g * (qt0 * n1 - qt1 * n0)
-        # Lagrangian transport (Jω/e) × ω and the unsteady dilatation term (Jω/e)·ė/e
+        density[i] = 0.5 * (n0 * s0 + n1 * s1 + n2 * s2) * rest_length[i]
+        # incompressible: the force per current area carries 1/e (A = A0/e)
+        g = 1.0 + inc * (1.0 / e - 1.0)
+        nl0[i] = g * (Q[0, 0, i] * n0 + Q[1, 0, i] * n1 + Q[2, 0, i] * n2)
+        nl1[i] = g * (Q[0, 1, i] * n0 + Q[1, 1, i] * n1 + Q[2, 1, i] * n2)
+        nl2[i] = g * (Q[0, 2, i] * n0 + Q[1, 2, i] * n1 + Q[2, 2, i] * n2)
+        # shear couple (Q t × n)·g: the moment of the internal force pair about the element;
+        # Lagrangian transport (Jω/e) × ω and unsteady dilatation (Jω/e)·ė/e
         j0 = g * f_inertia * inertia[0, i] * w[0, i]
         j1 = g * f_inertia * inertia[1, i] * w[1, i]
         j2 = g * f_inertia * inertia[2, i] * w[2, i]
-        tau0 += j1 * w[2, i] - j2 * w[1, i]
-        tau1 += j2 * w[0, i] - j0 * w[2, i]
-        tau2 += j0 * w[1, i] - j1 * w[0, i]
-        if incompressible:
-            edot = (t0 * (v[0, i + 1] - v[0, i]) + t1 * (v[1, i + 1] - v[1, i])
-                    + t2 * (v[2, i + 1] - v[2, i])) / (length * l0)
-            h = edot / e
-            tau0 += j0 * h
-            tau1 += j1 * h
-            tau2 += j2 * h
-        torque[0, i] = tau0
-        torque[1, i] = tau1
-        torque[2, i] = tau2
+        edot = (t0 * (v[0, i + 1] - v[0, i]) + t1 * (v[1, i + 1] - v[1, i])
+                + t2 * (v[2, i + 1] - v[2, i])) / (length * rest_length[i])
+        h = inc * edot / e
+        torque[0, i] = g * (qt1 * n2 - qt2 * n1) + j1 * w[2, i] - j2 * w[1, i] + j0 * h
+        torque[1, i] = g * (qt2 * n0 - qt0 * n2) + j2 * w[0, i] - j0 * w[2, i] + j1 * h
+        torque[2, i] = g * (qt0 * n1 - qt1 * n0) + j0 * w[1, i] - j1 * w[0, i] + j2 * h
+    stretch_energy = 0.0
+    for i in range(n):
+        stretch_energy += density[i]
 
-    bend_energy = 0.0
+    # nodes: the difference of the element forces
+    force[0, 0] = nl0[0]
+    force[1, 0] = nl1[0]
+    force[2, 0] = nl2[0]
+    for i in range(1, n):
+        force[0, i] = nl0[i] - nl0[i - 1]
+        force[1, i] = nl1[i] - nl1[i - 1]
+        force[2, i] = nl2[i] - nl2[i - 1]
+    force[0, n] = -nl0[n - 1]
+    force[1, n] = -nl1[n - 1]
+    force[2, n] = -nl2[n - 1]
+
+    # Voronoi domains: R = Q_j Q_{j+1}ᵀ, R_ab = d_a(j)·d_b(j+1); κ D0 = log R
     for j in range(n - 1):
-        # R = Q_j Q_{j+1}ᵀ, R_ab = d_a(j)·d_b(j+1); κ D0 = log R (material frame)
         r01 = Q[0, 0, j] * Q[1, 0, j + 1] + Q[0, 1, j] * Q[1, 1, j + 1] + Q[0, 2, j] * Q[1, 2, j + 1]
         r10 = Q[1, 0, j] * Q[0, 0, j + 1] + Q[1, 1, j] * Q[0, 1, j + 1] + Q[1, 2, j] * Q[0, 2, j + 1]
         r02 = Q[0, 0, j] * Q[2, 0, j + 1] + Q[0, 1, j] * Q[2, 1, j + 1] + Q[0, 2, j] * Q[2, 2, j + 1]
@@ -322,39 +329,54 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         a0 = 0.5 * (r21 - r12)
         a1 = 0.5 * (r02 - r20)
         a2 = 0.5 * (r10 - r01)
-        s2 = a0 * a0 + a1 * a1 + a2 * a2  # sin²θ
-        cos_th = 0.5 * (r00 + r11 + r22 - 1.0)
-        factor = _log_factor(s2, cos_th)
-        inv_d0 = 1.0 / rest_voronoi[j]
-        k0 = a0 * factor * inv_d0 - rest_curvature[0, j]
-        k1 = a1 * factor * inv_d0 - rest_curvature[1, j]
-        k2 = a2 * factor * inv_d0 - (f_twist * rest_curvature[2, j] + local_mask[j] * local_twist)
-        m0 = f_bend * bend_stiffness[0, j] * k0
-        m1 = f_bend * bend_stiffness[1, j] * k1
-        m2 = f_bend * bend_stiffness[2, j] * k2
-        bend_energy += 0.5 * (m0 * k0 + m1 * k1 + m2 * k2) * rest_voronoi[j]
-        if incompressible:
-            eps = 0.5 * (lengths[j] + lengths[j + 1]) * inv_d0
-            g3 = 1.0 / (eps * eps * eps)
-        else:
-            g3 = 1.0
-        c0 = g3 * m0
-        c1 = g3 * m1
-        c2 = g3 * m2
-        # κ × τ, with the full curvature κ (not κ − κ0), weighted by D0/ε³, split to both sides
-        kk0 = a0 * factor * inv_d0
-        kk1 = a1 * factor * inv_d0
-        kk2 = a2 * factor * inv_d0
-        h = 0.5 * rest_voronoi[j]
-        q0 = h * (kk1 * c2 - kk2 * c1)
-        q1 = h * (kk2 * c0 - kk0 * c2)
-        q2 = h * (kk0 * c1 - kk1 * c0)
-        torque[0, j] += c0 + q0
-        torque[1, j] += c1 + q1
-        torque[2, j] += c2 + q2
-        torque[0, j + 1] += q0 - c0
-        torque[1, j + 1] += q1 - c1
-        torque[2, j + 1] += q2 - c2
+        ka0[j] = a0
+        ka1[j] = a1
+        ka2[j] = a2
+        sin2[j] = a0 * a0 + a1 * a1 + a2 * a2
+        cos_[j] = 0.5 * (r00 + r11 + r22 - 1.0)
+    for j in range(n - 1):
+        factor[j] = _log_factor(sin2[j], cos_[j])  # the one branchy loop, kept short
+    bend_energy = 0.0
+    for j in range(n - 1):
+        f = factor[j] / rest_voronoi[j]
+        k0 = ka0[j] * f
+        k1 = ka1[j] * f
+        k2 = ka2[j] * f
+        d0 = k0 - rest_curvature[0, j]
+        d1 = k1 - rest_curvature[1, j]
+        d2 = k2 - (f_twist * rest_curvature[2, j] + local_mask[j] * local_twist)
+        m0 = f_bend * bend_stiffness[0, j] * d0
+        m1 = f_bend * bend_stiffness[1, j] * d1
+        m2 = f_bend * bend_stiffness[2, j] * d2
+        bend_energy += 0.5 * (m0 * d0 + m1 * d1 + m2 * d2) * rest_voronoi[j]
+        eps = 0.5 * (lengths[j] + lengths[j + 1]) / rest_voronoi[j]
+        g3 = 1.0 + inc * (1.0 / (eps * eps * eps) - 1.0)
+        c0[j] = g3 * m0
+        c1[j] = g3 * m1
+        c2[j] = g3 * m2
+        ka0[j] = k0
+        ka1[j] = k1
+        ka2[j] = k2
+    # elements: the difference of the couples, plus κ × τ·D0/ε³ split between both sides
+    # (with the full curvature κ, not κ − κ0)
+    for i in range(n):
+        acc0 = 0.0
+        acc1 = 0.0
+        acc2 = 0.0
+        if i < n - 1:
+            h = 0.5 * rest_voronoi[i]
+            acc0 += c0[i] + h * (ka1[i] * c2[i] - ka2[i] * c1[i])
+            acc1 += c1[i] + h * (ka2[i] * c0[i] - ka0[i] * c2[i])
+            acc2 += c2[i] + h * (ka0[i] * c1[i] - ka1[i] * c0[i])
+        if i > 0:
+            j = i - 1
+            h = 0.5 * rest_voronoi[j]
+            acc0 += h * (ka1[j] * c2[j] - ka2[j] * c1[j]) - c0[j]
+            acc1 += h * (ka2[j] * c0[j] - ka0[j] * c2[j]) - c1[j]
+            acc2 += h * (ka0[j] * c1[j] - ka1[j] * c0[j]) - c2[j]
+        torque[0, i] += acc0
+        torque[1, i] += acc1
+        torque[2, i] += acc2
     energies[0] = stretch_energy
     energies[1] = bend_energy
 
@@ -451,6 +473,7 @@ def advance(x, v, Q, w, t_start, n_steps,
     lengths = rest_length.copy()
     radius = rest_radius.copy()
     energies = np.zeros(2)
+    work = np.zeros((N_WORK, n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
     x_build = x.copy()
@@ -502,7 +525,7 @@ def advance(x, v, Q, w, t_start, n_steps,
         internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                        f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
-                       force, torque, dilatation, lengths, energies)
+                       force, torque, dilatation, lengths, energies, work)
         # Held frames are clamps at the rod's ends, half an element from the end elements'
         # centres: a bending/twisting spring over that half element (second order at the
         # boundary, and the twist put in spans the whole rest length L0).

@@ -1,0 +1,51 @@
+# rodphase: every target creates the environment it needs (.venv) on first use.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN     = $(VENV)/bin
+STAMP   = $(VENV)/.installed
+OUT    ?= out
+JOBS   ?= 2
+
+.PHONY: help install demo test lint bench figures phase clean
+
+help:  ## list the targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-9s %s\n", $$1, $$2}'
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e ".[dev,dask]"
+	touch $(STAMP)
+
+install: $(STAMP)  ## create .venv and install rodphase with its test and Dask extras
+
+# `rodphase sweep` exits 1 when some runs failed (they are recorded); the demo goes on.
+demo: $(STAMP)  ## run configs/quick.yaml (a small phase diagram) and draw its phase map
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase sweep configs/quick.yaml -o $(OUT)/quick.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/rodphase classify $(OUT)/quick.h5 --csv $(OUT)/quick.csv
+	$(BIN)/rodphase plot $(OUT)/quick.h5 --kind phase -o $(OUT)/quick_phase.png
+	@echo "phase map: $(OUT)/quick_phase.png  data: $(OUT)/quick.h5  table: $(OUT)/quick.csv"
+
+test: $(STAMP)  ## run the test suite
+	$(BIN)/pytest -q
+
+lint: $(STAMP)  ## static checks (ruff)
+	$(BIN)/ruff check rodphase tests scripts
+
+bench: $(STAMP)  ## kernel and topology benchmarks against PyElastica (installs the bench extra)
+	$(BIN)/pip install --quiet -e ".[bench]"
+	$(BIN)/python scripts/bench_kernel.py --write docs/benchmarks.md
+	$(BIN)/python scripts/bench_topology.py
+
+phase: $(STAMP)  ## the paper's Fig 3 phase diagram (configs/fig3_phase.yaml)
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase sweep configs/fig3_phase.yaml -o $(OUT)/fig3.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/rodphase classify $(OUT)/fig3.h5 --csv $(OUT)/fig3.csv
+	$(BIN)/rodphase plot $(OUT)/fig3.h5 --kind phase -o $(OUT)/fig3_phase.png
+
+figures: $(STAMP)  ## every figure of the paper (see docs/reproduction.md)
+	$(BIN)/python scripts/figures.py --out $(OUT) --jobs $(JOBS)
+
+clean:  ## remove outputs (keeps .venv)
+	rm -rf $(OUT) .pytest_cache

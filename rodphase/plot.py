@@ -1,0 +1,416 @@
+"""Figures: phase map, Lk/Tw/Wr curves, force–displacement, rod shapes, movies.
+
+Every function takes data (a DataFrame, arrays, a history dict or a RunResult) and a path,
+writes one file and returns its path. Nothing here simulates or opens HDF5 files.
+
+Figures are built on matplotlib's Agg canvas directly (no pyplot): no global figure registry
+to leak, and no dependence on the user's backend or display.
+"""
+
+from __future__ import annotations
+
+import itertools
+import shutil
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+import pandas as pd
+from matplotlib import animation
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from mpl_toolkits.mplot3d import proj3d
+from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+from .result import RunResult
+
+DPI = 200
+STYLE = {
+    "font.size": 10,
+    "axes.labelsize": 11,
+    "axes.titlesize": 11,
+    "legend.fontsize": 9,
+    "xtick.labelsize": 9,
+    "ytick.labelsize": 9,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "savefig.dpi": DPI,
+}
+# Okabe–Ito colours: distinguishable with the common colour-vision deficiencies
+BLACK, BLUE, VERMILLION, GREEN = "#000000", "#0072B2", "#D55E00", "#009E73"
+# PuOr is a ColorBrewer colourblind-safe diverging map: orange = plectoneme (−1),
+# purple = solenoid (+1); NaN alignment (no contacts: straight) is drawn grey
+ALIGNMENT_CMAP = matplotlib.colormaps["PuOr"].with_extremes(bad="0.6")
+PHASE_MARKERS = {"straight": "o", "plectoneme": "s", "solenoid": "^", "mixed": "D"}
+OTHER_MARKER = "P"
+EXPERIMENT_MARKERS = ("h", "p", "*", "X", "8", "v")
+TWIST_DENSITY_LABEL = r"twist density $\Phi a$ (rad)"
+
+
+def _figure(**kwargs) -> Figure:
+    fig = Figure(layout="constrained", **kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = None,
+              title: str | None = None) -> Path:
+    """Morphological phase map (paper Fig. 3) of a sweep table.
+
+    x = twist density Φa ("twist_density"), y = extension L/L0 ("extension"); colour =
+    "alignment" (−1 plectoneme … +1 solenoid, NaN grey), marker = "phase"; runs whose
+    "status" is not "ok" are small black crosses. `experiments` (columns twist_density,
+    extension, kind ∈ {plectoneme, solenoid}, optional series) are overlaid in black:
+    hollow for plectoneme onsets, solid for solenoid onsets, one marker shape per series.
+    """
+    missing = [c for c in ("twist_density", "extension") if c not in table.columns]
+    if missing:
+        raise ValueError(f"phase_map needs columns {missing}; the table has {list(table.columns)}")
+    n = len(table)
+    status = table["status"] if "status" in table else pd.Series(["ok"] * n, index=table.index)
+    phase = table["phase"] if "phase" in table else pd.Series(["?"] * n, index=table.index)
+    phase = phase.fillna("?").astype(str)
+    alignment = (table["alignment"] if "alignment" in table
+                 else pd.Series(np.nan, index=table.index)).astype(float)
+    ok = status == "ok"
+    norm = Normalize(-1.0, 1.0)
+
+    with matplotlib.rc_context(STYLE):
+        fig = _figure(figsize=(5.6, 4.6))
+        ax = fig.add_subplot()
+        handles = []
+        names = list(PHASE_MARKERS) + sorted(set(phase[ok]) - set(PHASE_MARKERS))
+        for name in names:
+            rows = ok & (phase == name)
+            if not rows.any():
+                continue
+            marker = PHASE_MARKERS.get(name, OTHER_MARKER)
+            ax.scatter(table.loc[rows, "twist_density"], table.loc[rows, "extension"],
+                       c=alignment[rows], cmap=ALIGNMENT_CMAP, norm=norm, marker=marker, s=42,
+                       edgecolors="0.25", linewidths=0.5, plotnonfinite=True, zorder=2)
+            face = "0.6" if name == "straight" else "0.9"  # straight is the grey of NaN
+            handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc=face, mec="0.25",
+                                  label=name if name != "?" else "unclassified"))
+        if (~ok).any():
+            ax.scatter(table.loc[~ok, "twist_density"], table.loc[~ok, "extension"], marker="x",
+                       s=18, c="black", linewidths=0.9, zorder=3)
+            handles.append(Line2D([], [], ls="", marker="x", ms=5, color="black",
+                                  label=f"failed ({int((~ok).sum())})"))
+        if experiments is not None and len(experiments):
+            handles += _experiments(ax, experiments)
+
+        ax.set_xlabel(TWIST_DENSITY_LABEL)
+        ax.set_ylabel(r"extension $L/L_0$")
+        if title:
+            ax.set_title(title)
+        bar = fig.colorbar(ScalarMappable(norm, ALIGNMENT_CMAP), ax=ax,
+                           ticks=[-1, -0.5, 0, 0.5, 1], aspect=30, pad=0.02)
+        bar.set_label("loop alignment")
+        bar.ax.text(0.5, -0.02, "plectoneme", transform=bar.ax.transAxes, ha="center",
+                    va="top", fontsize=8)
+        bar.ax.text(0.5, 1.02, "solenoid", transform=bar.ax.transAxes, ha="center",
+                    va="bottom", fontsize=8)
+        if handles:
+            fig.legend(handles=handles, loc="outside upper center",
+                       ncols=min(len(handles), 4), frameon=False, handletextpad=0.3,
+                       columnspacing=1.2)
+        return _save(fig, path)
+
+
+def _experiments(ax, experiments: pd.DataFrame) -> list:
+    """Overlay experimental transitions in black; return their legend handles."""
+    series = (experiments["series"].astype(str) if "series" in experiments
+              else pd.Series(["experiment"] * len(experiments), index=experiments.index))
+    kind = experiments["kind"].astype(str)
+    handles = []
+    for i, name in enumerate(dict.fromkeys(series)):
+        marker = EXPERIMENT_MARKERS[i % len(EXPERIMENT_MARKERS)]
+        for k, face in (("plectoneme", "none"), ("solenoid", "black")):
+            rows = (series == name) & (kind == k)
+            ax.scatter(experiments.loc[rows, "twist_density"], experiments.loc[rows, "extension"],
+                       marker=marker, s=40, facecolors=face, edgecolors="black", linewidths=1.0,
+                       zorder=4)
+        handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc="none", mec="black",
+                              label=name))
+    handles.append(Line2D([], [], ls="", marker="o", ms=6, mfc="none", mec="black",
+                          label="exp. plectoneme (hollow)"))
+    handles.append(Line2D([], [], ls="", marker="o", ms=6, mfc="black", mec="black",
+                          label="exp. solenoid (solid)"))
+    return handles
+
+
+def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: float | None = None,
+                    rest_length: float | None = None, title: str | None = None) -> Path:
+    """Link, twist and writhe (turns) against twist density Φa (paper Fig. 2).
+
+    Φa = end rotation (rad) × rest radius / rest length. A RunResult supplies both lengths
+    (from its diagnostics); a plain history dict needs `rest_radius` and `rest_length` (m).
+    """
+    if isinstance(result_or_dict, RunResult):
+        history = result_or_dict.history
+        diag = result_or_dict.diagnostics
+        rest_radius = rest_radius or diag.get("rest_radius")
+        rest_length = rest_length or diag.get("rest_length",
+                                               float(np.sum(result_or_dict.rest_lengths)))
+        status = result_or_dict.status
+    else:
+        history, status = result_or_dict, "ok"
+    missing = [k for k in ("end_rotation", "link", "twist", "writhe") if k not in history]
+    if missing:
+        raise ValueError(f"topology_curves needs history columns {missing}; run with topology "
+                         "on (link, twist and writhe are computed from the snapshots)")
+    if not all(v and np.isfinite(v) for v in (rest_radius, rest_length)):
+        raise ValueError("topology_curves needs rest_radius and rest_length (m) to compute "
+                         "Φa; pass them for a plain history dict")
+    phi_a = np.asarray(history["end_rotation"]) * rest_radius / rest_length
+
+    with matplotlib.rc_context(STYLE):
+        fig = _figure(figsize=(5.0, 3.6))
+        ax = fig.add_subplot()
+        ax.plot(phi_a, history["link"], color=BLACK, lw=1.8, label="link $Lk$")
+        ax.plot(phi_a, history["twist"], color=BLUE, lw=1.6, ls="--", label="twist $Tw$")
+        ax.plot(phi_a, history["writhe"], color=VERMILLION, lw=1.6, ls="-.",
+                label="writhe $Wr$")
+        ax.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+        ax.set_xlabel(TWIST_DENSITY_LABEL)
+        ax.set_ylabel("turns")
+        ax.legend(frameon=False)
+        heading = title or ""
+        if status != "ok":
+            heading = f"{heading} (status: {status})".strip()
+        if heading:
+            ax.set_title(heading)
+        return _save(fig, path)
+
+
+def force_displacement(history: dict | RunResult, path, *, stage: int | None = None,
+                       title: str | None = None) -> Path:
+    """End force against end displacement ΔU (paper Fig. 4a), with writhe on a twin axis if
+    the history has it. `stage` keeps only the rows of that protocol stage; ΔU is measured
+    from the first row kept.
+    """
+    if isinstance(history, RunResult):
+        history = history.history
+    missing = [k for k in ("end_force", "end_displacement") if k not in history]
+    if missing:
+        raise ValueError(f"force_displacement needs history columns {missing}")
+    rows = (np.asarray(history["stage"]) == stage if stage is not None
+            else np.ones(len(history["end_force"]), dtype=bool))
+    displacement = np.asarray(history["end_displacement"])[rows]
+    displacement = displacement - displacement[0] if len(displacement) else displacement
+    force = np.asarray(history["end_force"])[rows]
+
+    with matplotlib.rc_context(STYLE):
+        fig = _figure(figsize=(5.0, 3.6))
+        ax = fig.add_subplot()
+        lines = ax.plot(displacement, force, color=BLACK, lw=1.8, label="end force $F$")
+        ax.set_xlabel(r"end displacement $\Delta U$ (m)")
+        ax.set_ylabel(r"end force $F$ (N)")
+        if "writhe" in history:
+            twin = ax.twinx()
+            twin.spines["right"].set_visible(True)
+            lines += twin.plot(displacement, np.asarray(history["writhe"])[rows],
+                               color=VERMILLION, lw=1.4, ls="--", label="writhe $Wr$")
+            twin.set_ylabel("writhe $Wr$ (turns)", color=VERMILLION)
+            twin.tick_params(axis="y", colors=VERMILLION)
+            ax.legend(handles=lines, frameon=False)
+        if title:
+            ax.set_title(title)
+        return _save(fig, path)
+
+
+# --- rod shapes ---------------------------------------------------------------------------
+
+def _upright(positions: np.ndarray, axis: np.ndarray | None = None) -> np.ndarray:
+    """Rotate points so that `axis` (default: first node → last node) points up (+z)."""
+    if axis is None:
+        axis = positions[-1] - positions[0]
+    norm = np.linalg.norm(axis)
+    if norm == 0:
+        return positions
+    a, z = axis / norm, np.array([0.0, 0.0, 1.0])
+    v, c = np.cross(a, z), float(a @ z)
+    if c < -1 + 1e-12:  # pointing down: half turn about x
+        rotation = np.diag([1.0, -1.0, -1.0])
+    else:  # Rodrigues' formula for the rotation taking a onto z
+        vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+        rotation = np.eye(3) + vx + vx @ vx / (1 + c)
+    return positions @ rotation.T
+
+
+def _box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and per-axis half widths of the box holding `points`."""
+    lo, hi = points.reshape(-1, 3).min(axis=0), points.reshape(-1, 3).max(axis=0)
+    return (lo + hi) / 2, np.maximum(hi - lo, 1e-9) / 2
+
+
+# Rod views are laid out by hand: mplot3d axes are always square, so a tall thin rod in a
+# square axes wastes most of a figure. Each view gets a square axes as tall as its cell,
+# overlapping its neighbours with a transparent background, and the cell is only as wide as
+# the rod needs at the common scale.
+VIEW_HEIGHT = 3.2  # inch
+TITLE_HEIGHT = 0.3  # inch
+VIEW = {"elev": 15, "azim": -60}
+
+
+def _rod_axes(fig: Figure, centre_x: float, bottom: float, centre: np.ndarray,
+              half: np.ndarray, zoom: float = 1.0):
+    """A square 3D axes VIEW_HEIGHT tall, centred at `centre_x` (inch), `bottom` (inch)."""
+    w, h = fig.get_size_inches()
+    rect = ((centre_x - VIEW_HEIGHT / 2) / w, bottom / h, VIEW_HEIGHT / w, VIEW_HEIGHT / h)
+    ax = fig.add_axes(rect, projection="3d", computed_zorder=False)
+    for setter, c, d in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre, half):
+        setter(c - d, c + d)
+    # equal scale on all three axes; orthographic so a tube is equally thick near and far
+    ax.set_box_aspect(tuple(half), zoom=zoom)  # a copy: mplot3d scales the array in place
+    ax.set_proj_type("ortho")
+    ax.view_init(**VIEW)
+    ax.set_axis_off()
+    ax.set_facecolor("none")
+    return ax
+
+
+def _fit_view(half: np.ndarray) -> tuple[float, float]:
+    """Zoom that fits the box of half widths `half` in a VIEW_HEIGHT square, and the cell
+    width (inch) it then needs. Measured on a probe figure: mplot3d sizes the box by rules
+    of its own (the norm of the box aspect) that are simpler to measure than to restate."""
+    probe = Figure(figsize=(VIEW_HEIGHT, VIEW_HEIGHT))
+    FigureCanvasAgg(probe)
+    ax = _rod_axes(probe, VIEW_HEIGHT / 2, 0.0, np.zeros(3), half)
+    probe.canvas.draw()
+    corners = np.array(list(itertools.product(*[(-d, d) for d in half])))
+    x, y, _ = proj3d.proj_transform(*corners.T, ax.get_proj())
+    width, height = np.ptp(ax.transData.transform(np.column_stack([x, y])), axis=0) / probe.dpi
+    zoom = 0.96 * VIEW_HEIGHT / max(width, height)
+    cell = float(np.clip(zoom * width + 0.15, 1.0, VIEW_HEIGHT))
+    return zoom, round(cell * 75) / 75  # whole pixel pairs at 150 dpi, as MP4 encoders want
+
+
+def _line_width(fig: Figure, ax, radius: float) -> float:
+    """Line width (points) that draws a tube of `radius` (m) at the axes' data scale.
+
+    mplot3d has no data-scaled line widths: measure the screen length of one metre along
+    the vertical (orthographic view, so the scale is the same everywhere). Needs a drawn
+    figure, so that the axes have their final size.
+    """
+    centre = np.array([np.mean(ax.get_xlim()), np.mean(ax.get_ylim()), np.mean(ax.get_zlim())])
+    ends = np.array([centre, centre + [0.0, 0.0, 1.0]])
+    x, y, _ = proj3d.proj_transform(ends[:, 0], ends[:, 1], ends[:, 2], ax.get_proj())
+    pixels = ax.transData.transform(np.column_stack([x, y]))
+    points_per_metre = np.linalg.norm(pixels[1] - pixels[0]) * 72 / fig.dpi
+    return max(0.8, 2 * radius * points_per_metre)
+
+
+def _rod_segments(ax, positions: np.ndarray):
+    """Segments sorted far to near in the current view, so near strands hide far ones
+    (mplot3d draws a collection in order and does not sort lines by depth)."""
+    segments = np.stack([positions[:-1], positions[1:]], axis=1)
+    mid = segments.mean(axis=1)
+    _, _, depth = proj3d.proj_transform(mid[:, 0], mid[:, 1], mid[:, 2], ax.get_proj())
+    order = np.argsort(depth)[::-1]
+    # colour by arc length so the eye can follow one strand through a braid
+    return segments[order], order / max(len(segments) - 1, 1)
+
+
+def _draw_rod(ax, positions, width, collection=None):
+    segments, order = _rod_segments(ax, positions)
+    colours = matplotlib.colormaps["viridis"](order)
+    if collection is None:
+        collection = Line3DCollection(segments, colors=colours, linewidths=width,
+                                      capstyle="round")
+        ax.add_collection3d(collection)
+    else:
+        collection.set_segments(segments)
+        collection.set_color(colours)
+    return collection
+
+
+def shape_grid(results: list[tuple[str, np.ndarray, float]], path, *, ncols: int = 6) -> Path:
+    """Final rod shapes, one small 3D view each, drawn as tubes of the given radius.
+
+    `results` holds (label, positions (n+1, 3) in m, radius in m). Each rod is turned so that
+    its end-to-end axis points up; all views share one scale so sizes compare.
+    """
+    if not results:
+        raise ValueError("shape_grid needs at least one (label, positions, radius)")
+    shapes = [_upright(np.asarray(p, float)) for _, p, _ in results]
+    pad = 1.5 * max(r for _, _, r in results)
+    # one box for all views, the two lateral axes alike so no direction looks squashed
+    half = np.max([_box(p)[1] for p in shapes], axis=0) + pad
+    half[:2] = half[:2].max()
+    ncols = min(ncols, len(results))
+    nrows = -(-len(results) // ncols)
+    zoom, cell_w = _fit_view(half)
+    cell_h = VIEW_HEIGHT + TITLE_HEIGHT
+
+    with matplotlib.rc_context(STYLE):
+        fig = Figure(figsize=(cell_w * ncols, cell_h * nrows))
+        FigureCanvasAgg(fig)
+        views = []
+        for i, ((label, _, radius), shape) in enumerate(zip(results, shapes)):
+            row, col = divmod(i, ncols)
+            centre_x, bottom = (col + 0.5) * cell_w, (nrows - 1 - row) * cell_h
+            ax = _rod_axes(fig, centre_x, bottom, _box(shape)[0], half, zoom)
+            fig.text(centre_x / (cell_w * ncols), (bottom + VIEW_HEIGHT) / (cell_h * nrows),
+                     label, ha="center", va="bottom", fontsize=9)
+            views.append((ax, shape, radius))
+        fig.canvas.draw()  # final axes sizes, for the line widths
+        for ax, shape, radius in views:
+            _draw_rod(ax, shape, _line_width(fig, ax, radius))
+        return _save(fig, path)
+
+
+def movie(snapshot_positions: np.ndarray, radius: float, path, fps: int = 10, *,
+          times: np.ndarray | None = None, max_frames: int = 200) -> Path:
+    """Animate a rod (S, n+1, 3) with fixed axes over all frames.
+
+    Writes MP4 if ffmpeg is on PATH and `path` does not end in .gif, else a GIF (Pillow) next
+    to `path` with the suffix .gif. Returns the path written. At most `max_frames` evenly
+    spaced frames are kept (GIFs grow with every frame). `times` (s) labels the frames.
+    """
+    frames = np.asarray(snapshot_positions, float)
+    if frames.ndim != 3 or frames.shape[0] == 0:
+        raise ValueError(f"movie needs snapshots of shape (S, n+1, 3) with S > 0, got "
+                         f"{frames.shape}")
+    keep = np.unique(np.linspace(0, len(frames) - 1, min(max_frames, len(frames))).astype(int))
+    axis = frames[0, -1] - frames[0, 0]  # one rotation for every frame: the camera stays put
+    frames = np.stack([_upright(f, axis) for f in frames[keep]])
+    centre, half = _box(frames)
+    half += 1.5 * radius
+    half[:2] = half[:2].max()
+    path = Path(path)
+    use_mp4 = shutil.which("ffmpeg") is not None and path.suffix.lower() != ".gif"
+    path = path if use_mp4 or path.suffix.lower() == ".gif" else path.with_suffix(".gif")
+    path.parent.mkdir(parents=True, exist_ok=True)
+
+    with matplotlib.rc_context(STYLE):
+        zoom, width = _fit_view(half)
+        width = max(width, 1.6)  # room for the time label
+        fig = Figure(figsize=(width, VIEW_HEIGHT + TITLE_HEIGHT))
+        FigureCanvasAgg(fig)
+        ax = _rod_axes(fig, width / 2, 0.0, centre, half, zoom)
+        label = fig.text(0.5, 1.0, "", ha="center", va="top")
+        fig.canvas.draw()
+        collection = _draw_rod(ax, frames[0], _line_width(fig, ax, radius))
+
+        def update(i):
+            _draw_rod(ax, frames[i], None, collection)
+            label.set_text(f"t = {times[keep[i]]:.3g} s" if times is not None
+                           else f"frame {keep[i]}")
+            return collection, label
+
+        anim = animation.FuncAnimation(fig, update, frames=len(frames), blit=False)
+        writer = (animation.FFMpegWriter(fps=fps) if use_mp4
+                  else animation.PillowWriter(fps=fps))
+        anim.save(path, writer=writer, dpi=150)
+    return path
