@@ -71,11 +71,12 @@ def main():
 def run(scene, output, sets, force):
     """Run one SCENE (a YAML file or a shipped scene name, see `rodphase scenes`)."""
     from .scenes import SCENES
+
+    cfg = C.load_scene(scene, _overrides(sets), SCENES)
     from .store import open_store
     from .sweep import run_scene
     from .tabulate import classify_store
 
-    cfg = C.load_scene(scene, _overrides(sets), SCENES)
     _clear(output, force)
     click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
     result = run_scene(cfg.plain())

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 import time
 import traceback
 from contextlib import contextmanager
@@ -205,7 +204,6 @@ def _progress(total: int, enabled: bool):
 @contextmanager
 def _backend(backend: str, scheduler: str | None, jobs: int) -> Iterator[dict]:
     if backend == "loky":
-        os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # inherited by the workers
         yield {"backend": "loky", "n_jobs": jobs}
         return
     if backend != "dask":

@@ -136,9 +136,28 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     touching = 0
     worst = 0.0
     worst_element = -1
+    n = radius.shape[0]
+    # Each capsule lies within its reach (radius + half length) of its midpoint: one cheap
+    # distance test rejects most listed pairs before the closest-point computation.
+    mid = np.empty((3, n))
+    reach = np.empty(n)
+    for i in range(n):
+        u0 = x[0, i + 1] - x[0, i]
+        u1 = x[1, i + 1] - x[1, i]
+        u2 = x[2, i + 1] - x[2, i]
+        mid[0, i] = x[0, i] + 0.5 * u0
+        mid[1, i] = x[1, i] + 0.5 * u1
+        mid[2, i] = x[2, i] + 0.5 * u2
+        reach[i] = radius[i] + 0.5 * np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     for p in range(n_pairs):
         i = pairs[0, p]
         j = pairs[1, p]
+        m0 = mid[0, i] - mid[0, j]
+        m1 = mid[1, i] - mid[1, j]
+        m2 = mid[2, i] - mid[2, j]
+        r = reach[i] + reach[j]
+        if m0 * m0 + m1 * m1 + m2 * m2 >= r * r:
+            continue
         u0 = x[0, i + 1] - x[0, i]
         u1 = x[1, i + 1] - x[1, i]
         u2 = x[2, i + 1] - x[2, i]

@@ -1,0 +1,132 @@
+"""Config validation: every broken input names its key, exits 2, and shows no traceback."""
+
+import math
+
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from rodphase import config as C
+from rodphase.cli import main
+from rodphase.scenes import SCENES, build
+
+SCENE = {"scene": "twist_under_load", "rod": {"elements": 20}}
+SWEEP = {"sweep": {"scene": "twist_under_load", "axes": {"twist_density": [0.0, 1.0]},
+                   "samples": 2}}
+
+
+def with_(base, path, value):
+    return C.apply_overrides(base, [(path, value)])
+
+
+BROKEN_SCENES = [
+    (with_(SCENE, "rod.radius", -0.01), "rod.radius"),
+    (with_(SCENE, "rod.length", 0), "rod.length"),
+    (with_(SCENE, "rod.elements", 2.5), "rod.elements"),
+    (with_(SCENE, "rod.elements", 1), "rod.elements"),
+    (with_(SCENE, "rod.density", float("nan")), "rod.density"),
+    (with_(SCENE, "rod.radiuss", 0.02), "rod.radiuss"),
+    (with_(SCENE, "material.youngs_modulus", "soft"), "material.youngs_modulus"),
+    (with_(SCENE, "material.shear_modulus", -1.0), "material.shear_modulus"),
+    (with_(SCENE, "ends.start", "glued"), "ends.start"),
+    (with_(SCENE, "loading.extension", 0.9), "loading.extension"),
+    (with_(with_(SCENE, "loading.extension", 1.1), "loading.force_multiple", 25), "loading."),
+    (with_(SCENE, "loading.twist_rate", 0), "loading.twist_rate"),
+    (with_(SCENE, "physics.self_contact", "yes"), "physics.self_contact"),
+    (with_(SCENE, "physics.gravity", [0, 0]), "physics.gravity"),
+    (with_(SCENE, "solver.safety", 1.5), "solver.safety"),
+    (with_(SCENE, "solver.dt", -1e-5), "solver.dt"),
+    (with_(SCENE, "solver.hold_until", "forever"), "solver.hold_until"),
+    (with_(SCENE, "output.history_interval", 0), "output.history_interval"),
+    (with_(SCENE, "rod.radius", 0.6), "rod.radius"),
+    (with_(SCENE, "loading.force", 1e9), "loading"),
+    (with_(SCENE, "scene", "no_such_scene"), "scene"),
+    (with_(SCENE, "agent.first", 0.8), "agent.last"),
+    ({"scene": "twist_under_load", "rods": {}}, "rods"),
+]
+
+BROKEN_SWEEPS = [
+    (with_(SWEEP, "sweep.axes.twist_density", [1.0, 1.0]), "sweep.axes.twist_density"),
+    (with_(SWEEP, "sweep.axes.extension", [0.8, 1.2]), "sweep.axes.extension"),
+    (with_(SWEEP, "sweep.axes.extension", [1.0, 5.0]), "sweep.axes.extension"),
+    (with_(SWEEP, "sweep.axes.stretch", [1.0, 1.2]), "sweep.axes.stretch"),
+    (with_(SWEEP, "sweep.samples", 0), "sweep.samples"),
+    (with_(SWEEP, "sweep.sampler", "sobol"), "sweep.sampler"),
+    (with_(SWEEP, "sweep.seed", -1), "sweep.seed"),
+    (with_(SWEEP, "sweep.axes", {}), "sweep.axes"),
+    ({"sweep": {"axes": {"twist_density": [0, 1]}}}, "sweep.scene"),
+]
+
+
+def run_cli(args):
+    return CliRunner().invoke(main, args, catch_exceptions=False)
+
+
+@pytest.mark.parametrize("data, key", BROKEN_SCENES)
+def test_broken_scene_exits_2_naming_the_key(tmp_path, data, key):
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(data))
+    result = run_cli(["run", str(path), "-o", str(tmp_path / "out.h5")])
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: ")
+    assert key in result.output
+    assert "allowed" in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out.h5").exists()  # nothing written for a config that never ran
+
+
+@pytest.mark.parametrize("data, key", BROKEN_SWEEPS)
+def test_broken_sweep_exits_2_naming_the_key(tmp_path, data, key):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(data))
+    result = run_cli(["sweep", str(path), "-o", str(tmp_path / "out.h5"), "--quiet"])
+    assert result.exit_code == 2, result.output
+    assert key in result.output and "Traceback" not in result.output
+
+
+def test_unknown_key_suggests_the_closest(tmp_path):
+    with pytest.raises(C.ConfigError, match="did you mean 'radius'"):
+        C.validate_scene(with_(SCENE, "rod.raduis", 0.02), SCENES)
+
+
+def test_bad_set_override_exits_2(tmp_path):
+    result = run_cli(["run", "twist_under_load", "-o", str(tmp_path / "o.h5"), "--set", "rod.elements"])
+    assert result.exit_code == 2 and "key.path=value" in result.output
+    result = run_cli(["run", "twist_under_load", "-o", str(tmp_path / "o.h5"), "--set", "rod.elements=-3"])
+    assert result.exit_code == 2 and "rod.elements" in result.output
+
+
+def test_yaml_exponent_without_sign_is_a_number():
+    # PyYAML reads 1.0e6 as a string; configs written that way must still work
+    cfg = C.validate_scene(with_(SCENE, "material.youngs_modulus", "1.0e6"), SCENES)
+    assert cfg.material.youngs_modulus == 1.0e6
+
+
+def test_unit_mapping_matches_the_paper():
+    cfg = C.validate_scene(with_(with_(SCENE, "loading.extension", 1.16), "loading.twist_density", 1.2),
+                           SCENES)
+    area = math.pi * 0.025**2
+    assert C.load_force(cfg) == pytest.approx(1e6 * area * (1 - 1 / 1.16))
+    assert C.twist_turns(cfg) == pytest.approx(1.2 * 1.0 / 0.025 / (2 * math.pi))
+    assert C.shear_modulus(cfg) == pytest.approx(2e6 / 3)  # G = 2E/3 as the paper states
+    cfg = C.validate_scene(with_(SCENE, "loading.force_multiple", 25), SCENES)
+    assert C.load_force(cfg) == pytest.approx(25 * math.pi**2 * 1e6 * math.pi * 0.025**4 / 4)
+
+
+def test_every_shipped_scene_validates_and_builds():
+    for path in sorted((C.PACKAGE_CONFIGS / "scenes").glob("*.yaml")):
+        cfg = C.load_scene(path, [("rod.elements", 20)], SCENES)
+        problem = build(cfg)
+        assert problem.stages and problem.rod.elements == 20
+
+
+def test_every_shipped_sweep_validates():
+    for path in sorted(C.PACKAGE_CONFIGS.glob("*.yaml")):
+        sweep, scene = C.load_sweep(path, [], SCENES)
+        assert sweep.samples >= 1 and scene.scene in SCENES
+
+
+def test_config_is_read_only():
+    cfg = C.validate_scene(SCENE, SCENES)
+    with pytest.raises(TypeError):
+        cfg.rod["radius"] = 1.0

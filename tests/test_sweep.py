@@ -1,0 +1,164 @@
+"""The sweep tool end to end: sampling, parallel runs, resume after a kill, Dask, classify, plot."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from rodphase import config as C
+from rodphase.cli import main
+from rodphase.scenes import SCENES
+from rodphase.sweep import plan, sample_points
+
+# coarse and short: 12 elements, a fast twist and brief holds; still a real run with contact
+FAST = {"rod.elements": 12, "solver.hold_max_time": 0.5, "loading.twist_rate": 2.0,
+        "loading.force_ramp_time": 0.2, "output.history_interval": 0.1}
+
+
+def sweep_file(tmp_path, samples=4, sampler="random", seed=3, name="sweep.yaml", extra=None):
+    data = {"sweep": {"scene": "twist_under_load", "set": dict(FAST, **(extra or {})),
+                      "axes": {"twist_density": [0.2, 1.2], "extension": [1.0, 1.2]},
+                      "sampler": sampler, "samples": samples, "seed": seed}}
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def final_positions(path):
+    with h5py.File(path, "r") as f:
+        return {rid: f["runs"][rid]["positions"][()] for rid in f["runs"]}
+
+
+def test_same_seed_same_samples_and_samplers_cover_the_box(tmp_path):
+    sweep, scene = C.load_sweep(sweep_file(tmp_path, samples=9), [], SCENES)
+    assert sample_points(sweep) == sample_points(sweep)
+    for sampler in ("random", "lhs", "grid"):
+        sw, _ = C.load_sweep(sweep_file(tmp_path, samples=9, sampler=sampler), [], SCENES)
+        points = np.array([[p["twist_density"], p["extension"]] for p in sample_points(sw)])
+        assert len(points) == 9
+        assert points[:, 0].min() >= 0.2 and points[:, 0].max() <= 1.2
+        assert points[:, 1].min() >= 1.0 and points[:, 1].max() <= 1.2
+    other, _ = C.load_sweep(sweep_file(tmp_path, samples=9, seed=4), [], SCENES)
+    assert sample_points(other) != sample_points(sweep)
+    jobs = plan(sweep, scene)
+    assert jobs[0].scene["loading"]["extension"] == pytest.approx(jobs[0].params["extension"])
+
+
+def test_sweep_classify_plot_end_to_end(tmp_path):
+    out = tmp_path / "out.h5"
+    result = cli("sweep", sweep_file(tmp_path), "-o", out, "--jobs", 1, "--quiet")
+    assert result.exit_code in (0, 1), result.output
+    assert "Launching 4 of 4 runs" in result.output
+    result = cli("classify", out, "--csv", tmp_path / "table.csv")
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(tmp_path / "table.csv")
+    assert len(table) == 4
+    assert {"twist_density", "extension", "alignment", "phase", "link", "twist", "writhe",
+            "status"} <= set(table.columns)
+    assert set(table["phase"]) <= {"straight", "plectoneme", "solenoid", "mixed", "failed"}
+    ok = table[table["status"] == "ok"]
+    # link = twist + writhe for every run, to the accuracy of the open-ribbon closure
+    assert np.abs(ok["link"] - ok["twist"] - ok["writhe"]).max() < 1e-6
+    result = cli("plot", out, "--kind", "phase", "-o", tmp_path / "phase.png")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "phase.png").stat().st_size > 10_000
+    # the file is readable without rodphase
+    with h5py.File(out, "r") as f:
+        assert "config_yaml" in f.attrs and "config_hash" in f.attrs
+        first = sorted(f["runs"])[0]
+        frame = pd.DataFrame({k: f["runs"][first]["history"][k][()] for k in ("time", "end_force")})
+        assert len(frame) > 3
+
+
+def test_jobs_one_and_two_give_identical_results(tmp_path):
+    path = sweep_file(tmp_path, samples=3)
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    assert cli("sweep", path, "-o", a, "--jobs", 1, "--quiet").exit_code in (0, 1)
+    assert cli("sweep", path, "-o", b, "--jobs", 2, "--quiet").exit_code in (0, 1)
+    pa, pb = final_positions(a), final_positions(b)
+    assert pa.keys() == pb.keys()
+    for rid in pa:
+        assert np.array_equal(pa[rid], pb[rid])
+
+
+def test_rerun_skips_finished_runs_and_other_config_is_refused(tmp_path):
+    path = sweep_file(tmp_path, samples=2)
+    out = tmp_path / "out.h5"
+    cli("sweep", path, "-o", out, "--quiet")
+    result = cli("sweep", path, "-o", out, "--quiet")
+    assert "Launching 0 of 2 runs" in result.output
+    result = cli("sweep", path, "-o", out, "--quiet", "--set", "rod.elements=14")
+    assert result.exit_code == 2 and "different config" in result.output
+
+
+def test_killed_sweep_resumes_and_keeps_finished_runs_identical(tmp_path):
+    # A real kill: the sweep runs in its own process group, is SIGKILLed once two runs are in
+    # the file, and the same command then completes only the missing runs.
+    path = sweep_file(tmp_path, samples=6, extra={"solver.hold_max_time": 2.0})
+    out = tmp_path / "out.h5"
+    command = [sys.executable, "-m", "rodphase.cli", "sweep", str(path), "-o", str(out),
+               "--jobs", "1", "--quiet"]
+    env = dict(os.environ, HDF5_USE_FILE_LOCKING="FALSE")
+    proc = subprocess.Popen(command, env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 300
+    finished = set()
+    try:
+        while time.time() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            try:
+                with h5py.File(out, "r", locking=False) as f:
+                    finished = {r for r in f.get("runs", {}) if f["runs"][r].attrs.get("status") == "ok"
+                                or f["runs"][r].attrs.get("status")}
+            except (OSError, KeyError):
+                continue
+            if len(finished) >= 2:
+                break
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    if len(finished) >= 6:
+        pytest.skip("the sweep finished before it could be killed")
+    assert len(finished) >= 2
+    before = final_positions(out)
+    result = cli("sweep", path, "-o", out, "--quiet")
+    assert result.exit_code in (0, 1), result.output
+    assert f"Launching {6 - len(before)} of 6 runs" in result.output
+    after = final_positions(out)
+    assert len(after) == 6
+    for rid, positions in before.items():
+        assert np.array_equal(positions, after[rid])
+
+
+def test_dask_local_cluster_gives_the_local_results(tmp_path):
+    pytest.importorskip("distributed")
+    path = sweep_file(tmp_path, samples=2)
+    local, remote = tmp_path / "local.h5", tmp_path / "dask.h5"
+    assert cli("sweep", path, "-o", local, "--quiet").exit_code in (0, 1)
+    result = cli("sweep", path, "-o", remote, "--quiet", "--backend", "dask", "--jobs", 2)
+    assert result.exit_code in (0, 1), result.output
+    assert "local Dask cluster" in result.output
+    a, b = final_positions(local), final_positions(remote)
+    assert a.keys() == b.keys()
+    for rid in a:
+        assert np.array_equal(a[rid], b[rid])
+
+
+def test_scenes_command_lists_the_shipped_configs():
+    result = cli("scenes")
+    assert result.exit_code == 0
+    assert "twist_under_load" in result.output and "quick.yaml" in result.output
