@@ -214,7 +214,7 @@ def loads(problem, state):
     K.internal_loads(state.x, state.v, state.Q, state.w, a["rest_length"], a["rest_voronoi"],
                      a["inertia"], a["shear_stiffness"], a["bend_stiffness"], a["rest_curvature"],
                      a["rest_shear"], np.zeros(n - 1), True, 1.0, 1.0, 1.0, 1.0, 0.0,
-                     force, torque, np.ones(n), np.ones(n), np.zeros(2), np.zeros((K.N_WORK, n)))
+                     force, torque, np.ones(n), np.ones(n), np.zeros(4), np.zeros((K.N_WORK, n)))
     return force, torque
 
 

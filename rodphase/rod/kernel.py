@@ -95,6 +95,7 @@ S_EQUILIBRIUM = 1
 S_NAN = 2
 S_SPEED = 3
 S_PENETRATION = 4
+S_RESOLUTION = 5  # neighbouring frames turned by more than 90°: the rod is under-resolved
 
 # info entries
 D_WHERE = 0  # node or element index where a guard tripped
@@ -249,7 +250,8 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
     """Internal forces on nodes and torques on elements (material frame), Gazzola 2018.
 
     force (3, n+1) and torque (3, n) are overwritten; energies[0:2] receive the stretch/shear
-    and bend/twist energies (quadratic forms of the linear law); work is (N_WORK, n) scratch.
+    and bend/twist energies (quadratic forms of the linear law), energies[2:4] the smallest
+    cosine of the rotation between neighbouring frames and where; work is (N_WORK, n) scratch.
     The passes are split so that each loop is branch-free and writes only its own index,
     which lets LLVM vectorise them over the (3, n) layout.
     """
@@ -334,8 +336,15 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         ka2[j] = a2
         sin2[j] = a0 * a0 + a1 * a1 + a2 * a2
         cos_[j] = 0.5 * (r00 + r11 + r22 - 1.0)
+    worst_cos = 1.0
+    worst_at = -1
     for j in range(n - 1):
         factor[j] = _log_factor(sin2[j], cos_[j])  # the one branchy loop, kept short
+        if cos_[j] < worst_cos:
+            worst_cos = cos_[j]
+            worst_at = j
+    energies[2] = worst_cos
+    energies[3] = worst_at
     bend_energy = 0.0
     for j in range(n - 1):
         f = factor[j] / rest_voronoi[j]
@@ -472,7 +481,7 @@ def advance(x, v, Q, w, t_start, n_steps,
     dilatation = np.ones(n)
     lengths = rest_length.copy()
     radius = rest_radius.copy()
-    energies = np.zeros(2)
+    energies = np.zeros(4)
     work = np.zeros((N_WORK, n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
@@ -526,6 +535,13 @@ def advance(x, v, Q, w, t_start, n_steps,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                        f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
                        force, torque, dilatation, lengths, energies, work)
+        if energies[2] < 0.0:
+            # beyond 90° between neighbours the matrix log nears its branch cut at 180°,
+            # where twist would silently wrap and link be lost: stop and say so
+            status = S_RESOLUTION
+            info[D_WHERE] = energies[3]
+            info[D_VALUE] = np.arccos(max(energies[2], -1.0))
+            break
         # Held frames are clamps at the rod's ends, half an element from the end elements'
         # centres: a bending/twisting spring over that half element (second order at the
         # boundary, and the twist put in spans the whole rest length L0).

@@ -20,6 +20,7 @@ _GUARD_NAMES = {
     k.S_NAN: "non-finite state (NaN or inf)",
     k.S_SPEED: "runaway velocity",
     k.S_PENETRATION: "contact penetration",
+    k.S_RESOLUTION: "under-resolved rod (neighbouring frames turned by more than 90°)",
 }
 
 
@@ -150,6 +151,34 @@ def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:
     return start, end
 
 
+def _signed_angle(a: np.ndarray, b: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Angle (rad) from a to b about `axis`, row by row, after projecting both on its normal plane."""
+    a = a - np.sum(a * axis, axis=1)[:, None] * axis
+    b = b - np.sum(b * axis, axis=1)[:, None] * axis
+    return np.arctan2(np.sum(axis * np.cross(a, b), axis=1), np.sum(a * b, axis=1))
+
+
+def clamp_twist(problem: Problem, start_frame, end_frame, history, positions, d1) -> np.ndarray:
+    """Turns of twist between each held clamp and the frame of the element next to it."""
+    from scipy.spatial.transform import Rotation
+
+    extra = np.zeros(len(positions))
+    axis = np.asarray(problem.ends.axis, float)
+    axis = axis / np.linalg.norm(axis)
+    if problem.ends.start_frame_held:
+        t0 = positions[:, 1] - positions[:, 0]
+        t0 /= np.linalg.norm(t0, axis=1)[:, None]
+        start_angle = problem.controls.start_rotation[1][0]
+        clamp = Rotation.from_rotvec(axis * start_angle).apply(start_frame[0])
+        extra += _signed_angle(np.tile(clamp, (len(positions), 1)), d1[:, 0], t0)
+    if problem.ends.end_frame_held:
+        t1 = positions[:, -1] - positions[:, -2]
+        t1 /= np.linalg.norm(t1, axis=1)[:, None]
+        clamp = Rotation.from_rotvec(history["end_rotation"][:, None] * axis).apply(end_frame[0])
+        extra += _signed_angle(d1[:, -1], clamp, t1)
+    return extra / (2 * np.pi)
+
+
 def rotational_damping_auto(rod) -> float:
     """40·√(G/ρ)/L0 [1/s]: see Solver.rotational_damping."""
     return 40.0 * math.sqrt(rod.shear_modulus / rod.density) / rod.length
@@ -256,11 +285,14 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         if code in _GUARD_NAMES:
             status = "unstable"
             where = int(info[k.D_WHERE])
-            unit = "element" if code == k.S_PENETRATION else "node"
+            unit = {k.S_PENETRATION: "element", k.S_RESOLUTION: "Voronoi domain"}.get(code, "node")
+            advice = ("Use more rod.elements (twist per element = Φa·L0/(a·n) rad)."
+                      if code == k.S_RESOLUTION else
+                      "Try a smaller solver.dt or solver.safety, more solver.damping, or a "
+                      "stiffer contact.stiffness.")
             message = (f"unstable in {label} at t = {t_end:.4g} s: {_GUARD_NAMES[code]} at {unit} "
                        f"{where} (value {info[k.D_VALUE]:.3g}); dt = {dt:.3g} s, stable bound "
-                       f"{bound:.3g} s. Try a smaller solver.dt or solver.safety, more "
-                       f"solver.damping, or a stiffer contact.stiffness.")
+                       f"{bound:.3g} s. {advice}")
             break
         if stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
             status = "not_converged"
@@ -285,7 +317,10 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         from ..topology import topology_history
 
         lk, tw, wr = topology_history(snapshot_positions, snapshot_d1)
-        history["link"], history["twist"], history["writhe"] = lk, tw, wr
+        # The clamps sit half an element beyond the end frames; the twist over those halves
+        # belongs to the rod, so that a rod clamped at both ends carries Lk = turns put in.
+        extra = clamp_twist(problem, start_frame, end_frame, history, snapshot_positions, snapshot_d1)
+        history["link"], history["twist"], history["writhe"] = lk + extra, tw + extra, wr
 
     lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
     rest = arrays["rest_length"]
