@@ -24,6 +24,7 @@ HISTORY_COLUMNS = (
     "residual",  # largest free nodal force / force scale
     "stiffness_factor",
     "radius_factor",
+    "contact_energy",  # J, penalty springs
 )
 
 

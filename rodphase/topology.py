@@ -16,7 +16,7 @@ from numba import njit, prange
 
 __all__ = [
     "EDGE_OFFSET_FRACTION",
-    "PARALLEL_MIN_PIECES",
+    "PARALLEL_MIN_PAIRS",
     "link",
     "topology_history",
     "twist",
@@ -29,9 +29,12 @@ __all__ = [
 #: 0.1 leaves a margin of 10 or more.
 EDGE_OFFSET_FRACTION = 0.1
 
-#: Below this many pieces a frame runs on one thread: starting the threads costs more than
-#: the work they share (measured crossover ~60-100 pieces on 2 cores).
-PARALLEL_MIN_PIECES = 100
+#: Work (segment pairs, ~15 ns each) below which a call runs on one thread. Waking numba's
+#: other threads usually takes microseconds, but on the 2-core VM this was measured on it
+#: stalled for a scheduler slice (~24 ms) in up to half of the calls, so threads only pay
+#: for work of tens of ms: frames above ~1200 pieces, or histories of many frames. Set it
+#: to 0 to thread every call on a dedicated machine.
+PARALLEL_MIN_PAIRS = 2_000_000
 
 _TWO_PI = 2.0 * math.pi
 _FOUR_PI = 4.0 * math.pi
@@ -542,8 +545,22 @@ def _frame_serial(points, normals, closed, ext, offset_fraction):
     return lk, tw, wr
 
 
+@njit(cache=True, error_model="numpy")
+def _history_serial(points_history, normals_history, closed, ext, offset_fraction):
+    S = points_history.shape[0]
+    out = np.empty((3, S))
+    for s in range(S):
+        lk, tw, wr = _frame_serial(
+            points_history[s], normals_history[s], closed, ext, offset_fraction
+        )
+        out[0, s] = lk
+        out[1, s] = tw
+        out[2, s] = wr
+    return out
+
+
 @njit(cache=True, error_model="numpy", parallel=True)
-def _history(points_history, normals_history, closed, ext, offset_fraction):
+def _history_parallel(points_history, normals_history, closed, ext, offset_fraction):
     S = points_history.shape[0]
     out = np.empty((3, S))
     for s in prange(S):
@@ -559,7 +576,7 @@ def _history(points_history, normals_history, closed, ext, offset_fraction):
 # --------------------------------------------------------------------------- public API
 
 
-def _threads(npieces):
+def _threads(pairs):
     """Chunks for the parallel kernels, or 0 for the serial ones.
 
     One chunk of equal work per thread, as numba's prange splits statically. The thread
@@ -567,7 +584,7 @@ def _threads(npieces):
     fill every core should set it to 1.
     """
     n = numba.get_num_threads()
-    return n if (n > 1 and npieces >= PARALLEL_MIN_PIECES) else 0
+    return n if (n > 1 and pairs >= PARALLEL_MIN_PAIRS) else 0
 
 
 def _as_points(points, name="points"):
@@ -626,7 +643,8 @@ def writhe(points, closed=False, extension=None) -> float:
     if not _enough(t, bool(closed)):
         return 0.0
     P, inf0, inf1, w0, w1 = _extend(nodes, t, bool(closed), ext)
-    nchunks = _threads(_npieces(P, bool(closed)))
+    npieces = _npieces(P, bool(closed))
+    nchunks = _threads(npieces * npieces // 2)
     if nchunks:
         s = _pairs_parallel(P, P, True, bool(closed), inf0, inf1, w0, w1, nchunks)
         return -float(s) / _TWO_PI
@@ -672,7 +690,8 @@ def link(
         return 0.0
     P, inf0, inf1, w0, w1 = _extend(nodes, t, bool(closed), ext)
     Q = _edge(P, u, bool(closed), f * min_len)
-    nchunks = _threads(_npieces(P, bool(closed)))
+    npieces = _npieces(P, bool(closed))
+    nchunks = _threads(npieces * npieces)
     if nchunks:
         s = _pairs_parallel(P, Q, False, bool(closed), inf0, inf1, w0, w1, nchunks)
         return -float(s) / _FOUR_PI
@@ -688,8 +707,8 @@ def topology_history(
 ):
     """(lk, tw, wr): arrays of length S for snapshots (S, N, 3) and d1 (S, N-1, 3).
 
-    Snapshots run in parallel (one per thread); each is computed as by `link`, `twist` and
-    `writhe`.
+    Each snapshot is computed as by `link`, `twist` and `writhe`; long histories run one
+    snapshot per thread (see PARALLEL_MIN_PAIRS).
     """
     P = np.ascontiguousarray(points_history, dtype=np.float64)
     D = np.ascontiguousarray(normals_history, dtype=np.float64)
@@ -707,5 +726,9 @@ def topology_history(
     if P.shape[0] == 0:
         empty = np.zeros(0)
         return empty, empty.copy(), empty.copy()
-    out = _history(P, D, bool(closed), ext, f)
+    pieces = P.shape[1] + 1  # with the two extensions
+    if _threads(P.shape[0] * 3 * pieces * pieces // 2):
+        out = _history_parallel(P, D, bool(closed), ext, f)
+    else:
+        out = _history_serial(P, D, bool(closed), ext, f)
     return out[0].copy(), out[1].copy(), out[2].copy()

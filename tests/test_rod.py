@@ -262,8 +262,8 @@ def test_contact_force_is_a_balanced_normal_spring():
     radius = np.full(3, 0.01)
     pairs = np.array([[0], [2]])
     force = np.zeros_like(x)
-    touching, depth, _ = add_contact_forces(x, v, radius, pairs, 1, np.full(3, 1e4), np.zeros(3),
-                                            1.0, 0.0, 1e-4, force)
+    touching, depth, _, _ = add_contact_forces(x, v, radius, pairs, 1, np.full(3, 1e4), np.zeros(3),
+                                            1.0, 0.0, 1e-4, 0.0, force)
     assert touching == 1 and depth == pytest.approx(0.5)
     assert force[:, :2].sum(axis=1) == pytest.approx([0, 0, -1e4 * 0.005])
     assert force[:, 2:].sum(axis=1) == pytest.approx([0, 0, 1e4 * 0.005])
@@ -341,3 +341,39 @@ def test_automatic_time_step_is_stable_over_many_steps():
     h = result.history
     energy = h["stretch_energy"] + h["bend_energy"] + h["kinetic_energy"]
     assert energy.max() < 1.05 * energy[0]  # bounded: no instability growing underneath
+
+
+def test_contact_forces_are_the_gradient_of_the_contact_energy():
+    # With the radius a0/sqrt(e) of an incompressible rod, the overlap depends on element
+    # lengths too; the forces (no dashpot) must be -dU/dx of U = sum k delta^2 / 2, else
+    # contact does work on a stretching rod. Central differences, relative error 1e-6
+    # (step 1e-7 m on overlaps of ~1e-3 m: truncation ~1e-8, round-off ~1e-9).
+    rng = np.random.default_rng(5)
+    n = 30
+    rest = 0.01
+    a0 = 0.025
+    s = np.arange(n + 1) * rest
+    x = np.vstack([0.02 * np.cos(s / 0.02 * 1.0), 0.02 * np.sin(s / 0.02), 0.005 * s / rest])
+    x += 1e-4 * rng.standard_normal(x.shape)
+    x = np.ascontiguousarray(x)
+
+    def energy_and_force(pos):
+        lengths = np.linalg.norm(np.diff(pos, axis=1), axis=0)
+        radius = a0 / np.sqrt(lengths / rest)
+        pairs, count = build_pairs(pos, 3, 0.2, np.empty((2, 8), dtype=np.int64))
+        force = np.zeros_like(pos)
+        out = add_contact_forces(pos, np.zeros_like(pos), radius, pairs, count, np.full(n, 1e4),
+                                 np.zeros(n), 1.0, 0.0, 1e-4, 1.0, force)
+        return out[3], force, out[0]
+
+    energy, force, touching = energy_and_force(x)
+    assert touching > 10 and energy > 0
+    h = 1e-7
+    numeric = np.zeros_like(x)
+    for c in range(3):
+        for i in range(n + 1):
+            xp, xm = x.copy(), x.copy()
+            xp[c, i] += h
+            xm[c, i] -= h
+            numeric[c, i] = -(energy_and_force(xp)[0] - energy_and_force(xm)[0]) / (2 * h)
+    assert np.abs(force - numeric).max() < 1e-6 * np.abs(force).max()

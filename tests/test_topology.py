@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from rodphase import topology
 from rodphase.topology import link, topology_history, twist, writhe
 
 # Round-off bound for sums of O(n^2) solid angles of O(1) size: measured residuals are
@@ -290,6 +291,26 @@ def test_history_matches_single_frames():
         np.testing.assert_allclose(
             [lk[s], tw[s], wr[s]], _all(frames[s], normals[s], False), atol=ROUNDOFF
         )
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_threaded_kernels_match_serial(monkeypatch, closed):
+    # Default thresholds keep these sizes on one thread; force the prange kernels (row
+    # chunks and one frame per thread). Summation order differs, so round-off only.
+    if closed:
+        pts = fourier_knot(8, n=150)
+        d1 = closed_ribbon(pts, 1, tilt=0.1)
+    else:
+        pts, d1 = helix_with_leads(1.0, 0.7, 3, 50, 1.0)
+    serial = _all(pts, d1, closed)
+    hist_serial = np.array(topology_history(pts[None], d1[None], closed=closed))
+    monkeypatch.setattr(topology, "PARALLEL_MIN_PAIRS", 0)
+    np.testing.assert_allclose(_all(pts, d1, closed), serial, atol=ROUNDOFF)
+    frames = np.repeat(pts[None], 3, axis=0)
+    normals = np.repeat(d1[None], 3, axis=0)
+    hist = np.array(topology_history(frames, normals, closed=closed))
+    np.testing.assert_allclose(hist, np.repeat(hist_serial, 3, axis=1), atol=ROUNDOFF)
+    np.testing.assert_allclose(hist[:, 0], serial, atol=ROUNDOFF)
 
 
 def test_bad_shapes_raise():

@@ -119,7 +119,7 @@ def closest_parameters(p0, p1, p2, q0, q1, q2, u0, u1, u2, w0, w1, w2):
 
 @njit(cache=True, fastmath=_FASTMATH)
 def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction,
-                       slip_speed, force):
+                       slip_speed, thinning, force):
     """Add penalty contact forces of the listed pairs to `force` (3, n+1).
 
     Normal force per pair: max(0, k·δ − c·δ̇) along the line of closest approach, with δ the
@@ -130,9 +130,16 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     velocity of the two closest points. Forces act at the closest points and are split
     linearly between the two nodes of each element.
 
-    Returns (number of touching pairs, largest overlap / smaller radius, its element index).
+    With `thinning` (1.0 for an incompressible rod, whose radius is a0/√e), the overlap also
+    depends on the two elements' lengths; the spring then pulls each element's nodes apart
+    along it by k·δ·a/(2l), the rest of the gradient of ½kδ². Without that term contact does
+    work on a stretching rod and can pump energy into it.
+
+    Returns (number of touching pairs, largest overlap / smaller radius, its element index,
+    the spring energy Σ ½·k·δ²).
     """
     damping_scale = np.sqrt(scale)
+    energy = 0.0
     touching = 0
     worst = 0.0
     worst_element = -1
@@ -174,6 +181,7 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         if overlap <= 0.0 or dist <= 0.0:
             continue
         touching += 1
+        energy += 0.5 * scale * stiffness[i] * overlap * overlap
         depth = overlap / min(radius[i], radius[j])
         if depth > worst:
             worst = depth
@@ -192,6 +200,22 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         f0 = fn * n0
         f1 = fn * n1
         f2 = fn * n2
+        if thinning != 0.0:
+            spring = thinning * scale * stiffness[i] * overlap
+            gi = spring * radius[i] / (2.0 * (u0 * u0 + u1 * u1 + u2 * u2))
+            gj = spring * radius[j] / (2.0 * (w0 * w0 + w1 * w1 + w2 * w2))
+            force[0, i] -= gi * u0
+            force[1, i] -= gi * u1
+            force[2, i] -= gi * u2
+            force[0, i + 1] += gi * u0
+            force[1, i + 1] += gi * u1
+            force[2, i + 1] += gi * u2
+            force[0, j] -= gj * w0
+            force[1, j] -= gj * w1
+            force[2, j] -= gj * w2
+            force[0, j + 1] += gj * w0
+            force[1, j + 1] += gj * w1
+            force[2, j + 1] += gj * w2
         if friction > 0.0:
             t0 = rv0 - vn * n0
             t1 = rv1 - vn * n1
@@ -214,7 +238,7 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         force[0, j + 1] -= t * f0
         force[1, j + 1] -= t * f1
         force[2, j + 1] -= t * f2
-    return touching, worst, worst_element
+    return touching, worst, worst_element, energy
 
 
 def brute_force_pairs(x, exclusion, cutoff):

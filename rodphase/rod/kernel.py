@@ -87,7 +87,8 @@ H_PENETRATION = 10  # largest overlap / radius
 H_RESIDUAL = 11  # largest free nodal force / force scale
 H_STIFFNESS = 12
 H_RADIUS_FACTOR = 13
-N_HISTORY = 14
+H_CONTACT_ENERGY = 14
+N_HISTORY = 15
 
 # status codes
 S_COMPLETED = 0
@@ -95,7 +96,7 @@ S_EQUILIBRIUM = 1
 S_NAN = 2
 S_SPEED = 3
 S_PENETRATION = 4
-S_RESOLUTION = 5  # neighbouring frames turned by more than 90°: the rod is under-resolved
+S_RESOLUTION = 5  # neighbouring frames turned by more than 135°: the rod is under-resolved
 
 # info entries
 D_WHERE = 0  # node or element index where a guard tripped
@@ -495,6 +496,7 @@ def advance(x, v, Q, w, t_start, n_steps,
     max_penetration = 0.0
     touching = 0
     worst = 0.0
+    contact_energy = 0.0
     residual = np.inf
     kinetic = np.inf
     held_start_frame = ints[I_START_FRAME_HELD] != 0
@@ -535,8 +537,8 @@ def advance(x, v, Q, w, t_start, n_steps,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                        f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
                        force, torque, dilatation, lengths, energies, work)
-        if energies[2] < 0.0:
-            # beyond 90° between neighbours the matrix log nears its branch cut at 180°,
+        if energies[2] < -0.7071:
+            # beyond 135° between neighbours the matrix log nears its branch cut at 180°,
             # where twist would silently wrap and link be lost: stop and say so
             status = S_RESOLUTION
             info[D_WHERE] = energies[3]
@@ -600,8 +602,9 @@ def advance(x, v, Q, w, t_start, n_steps,
                 need_build = False
                 rebuilds += 1
                 max_pairs = max(max_pairs, n_pairs)
-            touching, worst, worst_at = add_contact_forces(
-                x, v, radius, pairs, n_pairs, contact_k, contact_c, f_stiff, friction, slip_speed, force)
+            touching, worst, worst_at, contact_energy = add_contact_forces(
+                x, v, radius, pairs, n_pairs, contact_k, contact_c, f_stiff, friction, slip_speed,
+                1.0 if incompressible else 0.0, force)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -727,6 +730,7 @@ def advance(x, v, Q, w, t_start, n_steps,
                 history[rows, H_RESIDUAL] = residual
                 history[rows, H_STIFFNESS] = f_stiff
                 history[rows, H_RADIUS_FACTOR] = f_radius
+                history[rows, H_CONTACT_ENERGY] = contact_energy
                 rows += 1
 
         # drift: a full step, or half a step to land on t + dt at the end

@@ -20,7 +20,7 @@ _GUARD_NAMES = {
     k.S_NAN: "non-finite state (NaN or inf)",
     k.S_SPEED: "runaway velocity",
     k.S_PENETRATION: "contact penetration",
-    k.S_RESOLUTION: "under-resolved rod (neighbouring frames turned by more than 90°)",
+    k.S_RESOLUTION: "under-resolved rod (neighbouring frames turned by more than 135°)",
 }
 
 
