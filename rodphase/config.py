@@ -187,6 +187,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "safety": (number(0, 1, strict_min=True), 0.5),
         "damping": (number(0, unit="1/s"), 20.0),
         "rotational_damping": (auto_or(number(0, unit="1/s")), "auto"),
+        "quadratic_drag": (number(0, unit="1/m: extra drag rate per unit speed"), 1000.0),
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
         "hold_tolerance": (number(0, 1, strict_min=True), 1e-3),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),

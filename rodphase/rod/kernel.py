@@ -59,7 +59,9 @@ F_AXIS = 11  # 3 entries: unit rod axis (lab), direction of end rotation and dis
 F_FORCE_DIRECTION = 14  # 3 entries: unit direction of the end force
 F_GRAVITY = 17  # 3 entries, m/s²
 F_EQUILIBRIUM_AFTER = 20  # no equilibrium stop before this time (controls still moving)
-N_FLOATS = 21
+F_QUADRATIC_DRAG = 21  # 1/m: extra drag rate per unit speed (speed × this, in 1/s)
+F_DRAG_RADIUS = 22  # m: lever that turns spin into a surface speed for the quadratic drag
+N_FLOATS = 23
 
 # control tables
 T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
@@ -476,6 +478,8 @@ def advance(x, v, Q, w, t_start, n_steps,
     force_scale = floats[F_FORCE_SCALE]
     length_scale = floats[F_LENGTH_SCALE]
     equilibrium_after = floats[F_EQUILIBRIUM_AFTER]
+    quadratic_drag = floats[F_QUADRATIC_DRAG]
+    drag_radius = floats[F_DRAG_RADIUS]
 
     force = np.zeros((3, n + 1))
     torque = np.zeros((3, n))
@@ -657,6 +661,22 @@ def advance(x, v, Q, w, t_start, n_steps,
                 gi = dilatation[i] if incompressible else 1.0
                 w[c, i] = (w[c, i] * decay_rotation[c]
                            + gain_rotation[c] * dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2))
+        if quadratic_drag > 0.0:
+            # Drag growing with speed (implicit, so stable at any speed): quasi-static motion
+            # barely feels it, but a snap-through cannot turn stored twist into speeds that
+            # no contact spring can stop. Equilibria do not depend on it.
+            for i in range(n + 1):
+                speed = np.sqrt(v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
+                f = 1.0 / (1.0 + quadratic_drag * speed * dt)
+                v[0, i] *= f
+                v[1, i] *= f
+                v[2, i] *= f
+            for i in range(n):
+                spin = drag_radius * np.sqrt(w[0, i] ** 2 + w[1, i] ** 2 + w[2, i] ** 2)
+                f = 1.0 / (1.0 + quadratic_drag * spin * dt)
+                w[0, i] *= f
+                w[1, i] *= f
+                w[2, i] *= f
         _hold_velocities(v, ints, floats, disp_rate)
 
         if check or record:

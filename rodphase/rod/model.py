@@ -152,6 +152,9 @@ class Solver:
     # L0²/(π²·2G/(ρν)) ≈ 0.1 s for the paper's rod. (PyElastica's matched 4·damping/a² is
     # far heavier: twist then piles up at a turning end.)
     rotational_damping: float | None = None
+    # 1/m: drag rate growing with speed, speed × quadratic_drag [1/s] (spin × radius for
+    # rotation), integrated implicitly. 0 turns it off.
+    quadratic_drag: float = 0.0
     history_interval: float = 0.05  # s between history rows
     check_interval: int = 50  # steps between guard and equilibrium checks
     tolerance: float = 1e-4  # equilibrium: residual force / force scale

@@ -128,6 +128,8 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     floats[k.F_FORCE_DIRECTION:k.F_FORCE_DIRECTION + 3] = fdir / np.linalg.norm(fdir)
     floats[k.F_GRAVITY:k.F_GRAVITY + 3] = controls.gravity
     floats[k.F_EQUILIBRIUM_AFTER] = equilibrium_after
+    floats[k.F_QUADRATIC_DRAG] = solver.quadratic_drag
+    floats[k.F_DRAG_RADIUS] = rod.radius
     return ints, floats
 
 
