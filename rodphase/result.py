@@ -49,6 +49,9 @@ class RunResult:
     snapshot_d1: np.ndarray
     diagnostics: dict = field(default_factory=dict)
     stage_ends: list[int] = field(default_factory=list)  # history row closing each stage
+    # (positions, directors) at the end of each stage, for splitting a continuation run;
+    # not stored
+    stage_states: list = field(default_factory=list, repr=False)
 
     @property
     def ok(self) -> bool:

@@ -72,9 +72,12 @@ def scene_for(scene, point: dict[str, float]):
 
 @dataclass
 class Job:
-    run_id: str
-    params: dict
-    scene: dict  # plain, validated scene for this sample
+    """One simulation: one sample, or (continuation) several samples sharing one twist ramp."""
+
+    run_ids: list[str]
+    params: list[dict]
+    scene: dict  # plain, validated scene
+    twist_targets: list[float] | None = None  # turns, ascending, one per run id
 
 
 @contextmanager
@@ -90,25 +93,63 @@ def single_threaded_numba():
         numba.set_num_threads(previous)
 
 
-def run_scene(scene_plain: dict, *, topology: bool | None = None) -> RunResult:
+def run_scene(scene_plain: dict, *, topology: bool | None = None,
+              twist_targets: list[float] | None = None) -> RunResult:
     """Build and simulate one scene (a plain validated dict). Never raises for a failed run:
     a run that goes unstable comes back with that status."""
     from .rod import simulate
     from .scenes import SCENES, build
 
     cfg = C.validate_scene(scene_plain, SCENES)
-    problem = build(cfg)
+    extra = {} if twist_targets is None else {"twist_targets": twist_targets}
+    problem = build(cfg, **extra)
     want_topology = cfg.output.topology if topology is None else topology
     return simulate(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
 
 
-def execute(job: Job) -> tuple[str, dict, RunResult | None, str]:
-    """Worker entry point: (run_id, params, result or None, error text)."""
+def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
+    """Worker entry point: one (run_id, params, result or None, error text) per sample."""
     with single_threaded_numba():
         try:
-            return job.run_id, job.params, run_scene(job.scene), ""
+            result = run_scene(job.scene, twist_targets=job.twist_targets)
         except Exception:  # a bug, not a physical failure: keep the sweep going, record it
-            return job.run_id, job.params, None, traceback.format_exc(limit=4)
+            error = traceback.format_exc(limit=4)
+            return [(rid, p, None, error) for rid, p in zip(job.run_ids, job.params)]
+    if job.twist_targets is None:
+        return [(job.run_ids[0], job.params[0], result, "")]
+    return [(rid, p, split_continuation(result, k), "")
+            for k, (rid, p) in enumerate(zip(job.run_ids, job.params))]
+
+
+def split_continuation(result: RunResult, k: int) -> RunResult:
+    """The k-th sample of a continuation run: the state where its hold ended, the history up
+    to there, and the status of that hold (or of the run, if it stopped before)."""
+    from dataclasses import replace
+
+    stages = result.diagnostics.get("stages", [])
+    index = next((i for i, st in enumerate(stages) if st["label"] == f"hold {k}"), None)
+    if index is None:
+        return replace(result, status=result.status if result.status != "ok" else "error",
+                       message=f"the continuation stopped before sample {k}: {result.message}",
+                       history={key: v[:0] for key, v in result.history.items()},
+                       snapshot_positions=result.snapshot_positions[:0],
+                       snapshot_d1=result.snapshot_d1[:0], stage_states=[])
+    row = result.stage_ends[index] + 1
+    positions, directors = result.stage_states[index]
+    hold = stages[index]
+    lengths = np.linalg.norm(np.diff(positions, axis=0), axis=1)
+    radius = result.diagnostics["rest_radius"]
+    status = "ok" if hold["equilibrium"] else "not_converged"
+    message = ("completed" if status == "ok" else
+               f"hold {k} did not reach equilibrium (residual {hold['residual']:.2g})")
+    diagnostics = dict(result.diagnostics, continuation_sample=k,
+                       final_time=hold["end_time"])
+    return replace(result, status=status, message=message, positions=positions,
+                   directors=directors, radii=radius * np.sqrt(result.rest_lengths / lengths),
+                   history={key: v[:row] for key, v in result.history.items()},
+                   snapshot_positions=result.snapshot_positions[:row],
+                   snapshot_d1=result.snapshot_d1[:row], diagnostics=diagnostics,
+                   stage_ends=result.stage_ends[:index + 1], stage_states=[])
 
 
 def error_result(scene_plain: dict, message: str) -> RunResult:
@@ -121,15 +162,34 @@ def error_result(scene_plain: dict, message: str) -> RunResult:
 
 
 def plan(sweep, scene) -> list[Job]:
-    """Every job of the sweep, each sample's scene checked before anything runs."""
-    jobs = []
-    for index, point in enumerate(sample_points(sweep)):
+    """Every job of the sweep, each sample's scene checked before anything runs.
+
+    The continuation sampler groups the grid by everything but the twist density: each
+    group is one run that twists through its twist densities in order, relaxing to
+    equilibrium at each, so k samples cost about one run.
+    """
+    points = sample_points(sweep)
+    checked = []
+    for index, point in enumerate(points):
         try:
             cfg = scene_for(scene, point)
         except C.ConfigError as exc:
             raise C.ConfigError(f"sample {index} ({_describe(point)}): {exc.path}", exc.value,
                                 exc.allowed) from None
-        jobs.append(Job(run_id=f"run-{index:05d}", params=dict(point), scene=cfg.plain()))
+        checked.append((f"run-{index:05d}", dict(point), cfg))
+    if sweep.sampler != "continuation":
+        return [Job([rid], [p], cfg.plain()) for rid, p, cfg in checked]
+    if "twist_density" not in sweep.axes:
+        raise C.ConfigError("sweep.sampler", "continuation", "a sweep with a twist_density axis")
+    groups: dict[tuple, list] = {}
+    for rid, point, cfg in checked:
+        key = tuple(sorted((k, v) for k, v in point.items() if k != "twist_density"))
+        groups.setdefault(key, []).append((rid, point, cfg))
+    jobs = []
+    for members in groups.values():
+        members.sort(key=lambda m: m[1]["twist_density"])
+        jobs.append(Job([m[0] for m in members], [m[1] for m in members], members[0][2].plain(),
+                        twist_targets=[C.twist_turns(m[2]) for m in members]))
     return jobs
 
 
@@ -163,22 +223,25 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
     with open_store(out_path, config_text=text, config_hash=digest, version=__version__,
                     kind="sweep") as store:
         finished = store.done_ids(include_failed=not retry_failed)
-        todo = [j for j in all_jobs if j.run_id not in finished]
-        skipped = len(all_jobs) - len(todo)
+        todo = [j for j in all_jobs if not set(j.run_ids) <= finished]
+        total = sum(len(j.run_ids) for j in all_jobs)
+        skipped = total - sum(len(j.run_ids) for j in todo)
         where = f"on Dask at {scheduler}" if backend == "dask" and scheduler else (
             "on a local Dask cluster" if backend == "dask" else "locally")
-        echo(f"Launching {len(todo)} of {len(all_jobs)} runs {where} with {jobs} worker(s)"
+        shared = (f" in {len(todo)} continuation run(s)" if sweep.sampler == "continuation"
+                  else "")
+        echo(f"Launching {total - skipped} of {total} runs{shared} {where} with {jobs} worker(s)"
              + (f"; {skipped} already in {out_path}" if skipped else ""))
         failures: list[tuple[str, str, str]] = []
         done = 0
         start = time.perf_counter()
-        bar = _progress(len(todo), progress)
+        bar = _progress(total - skipped, progress)
         with _backend(backend, scheduler, jobs) as config:
             with parallel_config(**config):
                 results = Parallel(return_as="generator_unordered")(
                     delayed(execute)(job) for job in todo)
-                scene_of = {j.run_id: j.scene for j in todo}
-                for run_id, params, result, error in results:
+                scene_of = {rid: j.scene for j in todo for rid in j.run_ids}
+                for run_id, params, result, error in itertools.chain.from_iterable(results):
                     if result is None:
                         result = error_result(scene_of[run_id], error)
                     store.write_run(run_id, params, result,
@@ -192,7 +255,7 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
                     bar.set_postfix(done=done, failed=len(failures))
         bar.close()
         wall = time.perf_counter() - start
-    return SweepReport(len(all_jobs), skipped, done, len(failures), wall, failures)
+    return SweepReport(total, skipped, done, len(failures), wall, failures)
 
 
 def _progress(total: int, enabled: bool):

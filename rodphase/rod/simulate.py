@@ -228,7 +228,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     initial_end = state.x[:, n].copy()
     start_frame, end_frame = clamp_frames(state)
 
-    rows_h, rows_x, rows_d, stage_ids, stage_ends = [], [], [], [], []
+    rows_h, rows_x, rows_d, stage_ids, stage_ends, stage_states = [], [], [], [], [], []
     info = np.zeros(k.N_INFO)
     status, message = "ok", "completed"
     steps_total = 0
@@ -280,6 +280,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         rows_d.append(snap_d[:rows])
         stage_ids.append(np.full(rows, index))
         stage_ends.append(sum(len(r) for r in rows_h) - 1)
+        stage_states.append((state.positions, state.directors))
         label = stage.label or f"stage {index}"
         stage_report.append({"label": label, "steps": int(steps), "end_time": float(t_end),
                              "equilibrium": code == k.S_EQUILIBRIUM,
@@ -338,4 +339,5 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     return RunResult(status=status, message=message, positions=state.positions,
                      directors=state.directors, radii=radii, rest_lengths=rest.copy(),
                      history=history, snapshot_positions=snapshot_positions,
-                     snapshot_d1=snapshot_d1, diagnostics=diagnostics, stage_ends=stage_ends)
+                     snapshot_d1=snapshot_d1, diagnostics=diagnostics, stage_ends=stage_ends,
+                     stage_states=stage_states)
