@@ -22,7 +22,13 @@ applied before the boundary conditions so that prescribed motions are exact.
 """
 
 import numpy as np
-from numba import njit
+from numba import njit as _njit
+
+
+def njit(*args, **kwargs):
+    # error_model="numpy": no zero-division checks inside loops, so LLVM can vectorise them
+    kwargs.setdefault("error_model", "numpy")
+    return _njit(*args, **kwargs)
 
 from .contact import add_contact_forces, build_pairs
 
@@ -180,23 +186,24 @@ def rotated_frame(reference, axis, angle, out):
     k0 = axis[0]
     k1 = axis[1]
     k2 = axis[2]
-    # R = cI + s[k]× + (1 − c) k kᵀ
-    R = np.empty((3, 3))
-    R[0, 0] = c + (1 - c) * k0 * k0
-    R[0, 1] = -s * k2 + (1 - c) * k0 * k1
-    R[0, 2] = s * k1 + (1 - c) * k0 * k2
-    R[1, 0] = s * k2 + (1 - c) * k1 * k0
-    R[1, 1] = c + (1 - c) * k1 * k1
-    R[1, 2] = -s * k0 + (1 - c) * k1 * k2
-    R[2, 0] = -s * k1 + (1 - c) * k2 * k0
-    R[2, 1] = s * k0 + (1 - c) * k2 * k1
-    R[2, 2] = c + (1 - c) * k2 * k2
+    # R = cI + s[k]× + (1 − c) k kᵀ, as scalars: this runs every step, so no allocation
+    q = 1.0 - c
+    r00 = c + q * k0 * k0
+    r01 = -s * k2 + q * k0 * k1
+    r02 = s * k1 + q * k0 * k2
+    r10 = s * k2 + q * k1 * k0
+    r11 = c + q * k1 * k1
+    r12 = -s * k0 + q * k1 * k2
+    r20 = -s * k1 + q * k2 * k0
+    r21 = s * k0 + q * k2 * k1
+    r22 = c + q * k2 * k2
     for r in range(3):
-        for col in range(3):
-            acc = 0.0
-            for m in range(3):
-                acc += reference[r, m] * R[col, m]
-            out[r, col] = acc
+        a0 = reference[r, 0]
+        a1 = reference[r, 1]
+        a2 = reference[r, 2]
+        out[r, 0] = a0 * r00 + a1 * r01 + a2 * r02
+        out[r, 1] = a0 * r10 + a1 * r11 + a2 * r12
+        out[r, 2] = a0 * r20 + a1 * r21 + a2 * r22
 
 
 @njit(cache=True, inline="always")
@@ -212,6 +219,11 @@ def _log_factor(s2, cos_th):
     return np.arctan2(s, cos_th) / s
 
 
+@njit(cache=True, inline="always")
+def _row_dot(A, i, B, j):
+    return A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
+
+
 @njit(cache=True)
 def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result):
     """Couple of a clamp spring between frames A and B (rows d1 d2 d3) over half an element.
@@ -219,14 +231,12 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
     κ = log(A Bᵀ)/half_length in the material frame; result[0:3] = g3·B(κ − κ0) (the couple),
     result[3:6] = half_length·κ × couple (its share of the κ × τ term), result[6] the energy.
     """
-    r = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            r[i, j] = A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
-    a0 = 0.5 * (r[2, 1] - r[1, 2])
-    a1 = 0.5 * (r[0, 2] - r[2, 0])
-    a2 = 0.5 * (r[1, 0] - r[0, 1])
-    factor = _log_factor(a0 * a0 + a1 * a1 + a2 * a2, 0.5 * (r[0, 0] + r[1, 1] + r[2, 2] - 1.0))
+    # R_ab = row a of A · row b of B, only the entries the log needs
+    a0 = 0.5 * (_row_dot(A, 2, B, 1) - _row_dot(A, 1, B, 2))
+    a1 = 0.5 * (_row_dot(A, 0, B, 2) - _row_dot(A, 2, B, 0))
+    a2 = 0.5 * (_row_dot(A, 1, B, 0) - _row_dot(A, 0, B, 1))
+    trace = _row_dot(A, 0, B, 0) + _row_dot(A, 1, B, 1) + _row_dot(A, 2, B, 2)
+    factor = _log_factor(a0 * a0 + a1 * a1 + a2 * a2, 0.5 * (trace - 1.0))
     k0 = a0 * factor / half_length
     k1 = a1 * factor / half_length
     k2 = a2 * factor / half_length
