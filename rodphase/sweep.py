@@ -42,7 +42,7 @@ def _grid(axes: dict, samples: int, seed: int) -> np.ndarray:
 
 
 SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "grid": _grid,
-                                 "continuation": _grid}
+                                 "continuation": _grid, "adaptive": _lhs}
 
 
 def sample_points(sweep) -> list[dict[str, float]]:
@@ -213,49 +213,114 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
               scheduler: str | None = None, retry_failed: bool = False,
               progress: bool = True, echo: Callable[[str], None] = print) -> SweepReport:
     """Run every missing sample of the sweep into the store at `out_path` (resuming)."""
-    from joblib import Parallel, delayed, parallel_config
-
     from .store import open_store
 
-    all_jobs = plan(sweep, scene)
     text = C.to_yaml(sweep=sweep, scene=scene)
     digest = C.config_hash(sweep, scene)
+    where = f"on Dask at {scheduler}" if backend == "dask" and scheduler else (
+        "on a local Dask cluster" if backend == "dask" else "locally")
+    report = SweepReport(0, 0, 0, 0, 0.0, [])
+    start = time.perf_counter()
     with open_store(out_path, config_text=text, config_hash=digest, version=__version__,
-                    kind="sweep") as store:
-        finished = store.done_ids(include_failed=not retry_failed)
-        todo = [j for j in all_jobs if not set(j.run_ids) <= finished]
-        total = sum(len(j.run_ids) for j in all_jobs)
-        skipped = total - sum(len(j.run_ids) for j in todo)
-        where = f"on Dask at {scheduler}" if backend == "dask" and scheduler else (
-            "on a local Dask cluster" if backend == "dask" else "locally")
-        shared = (f" in {len(todo)} continuation run(s)" if sweep.sampler == "continuation"
-                  else "")
-        echo(f"Launching {total - skipped} of {total} runs{shared} {where} with {jobs} worker(s)"
-             + (f"; {skipped} already in {out_path}" if skipped else ""))
-        failures: list[tuple[str, str, str]] = []
-        done = 0
-        start = time.perf_counter()
-        bar = _progress(total - skipped, progress)
-        with _backend(backend, scheduler, jobs) as config:
-            with parallel_config(**config):
-                results = Parallel(return_as="generator_unordered")(
-                    delayed(execute)(job) for job in todo)
-                scene_of = {rid: j.scene for j in todo for rid in j.run_ids}
-                for run_id, params, result, error in itertools.chain.from_iterable(results):
-                    if result is None:
-                        result = error_result(scene_of[run_id], error)
-                    store.write_run(run_id, params, result,
-                                    {"wall_time": result.diagnostics.get("wall_time", 0.0)})
-                    if result.ok:
-                        done += 1
-                    else:
-                        failures.append((run_id, result.status, result.message.splitlines()[-1]
-                                         if result.message else ""))
-                    bar.update(1)
-                    bar.set_postfix(done=done, failed=len(failures))
-        bar.close()
-        wall = time.perf_counter() - start
-    return SweepReport(total, skipped, done, len(failures), wall, failures)
+                    kind="sweep") as store, _backend(backend, scheduler, jobs) as config:
+        rounds = adaptive_rounds(sweep, scene, store) if sweep.sampler == "adaptive" else [
+            plan(sweep, scene)]
+        for all_jobs in rounds:
+            finished = store.done_ids(include_failed=not retry_failed)
+            todo = [j for j in all_jobs if not set(j.run_ids) <= finished]
+            total = sum(len(j.run_ids) for j in all_jobs)
+            skipped = total - sum(len(j.run_ids) for j in todo)
+            shared = (f" in {len(todo)} continuation run(s)" if sweep.sampler == "continuation"
+                      else "")
+            echo(f"Launching {total - skipped} of {total} runs{shared} {where} with {jobs} "
+                 f"worker(s)" + (f"; {skipped} already in {out_path}" if skipped else ""))
+            _run_jobs(store, todo, config, progress, report)
+            report.total += total
+            report.skipped += skipped
+    report.wall = time.perf_counter() - start
+    return report
+
+
+def _run_jobs(store, todo: list[Job], config: dict, progress: bool, report: SweepReport) -> None:
+    """Run jobs in parallel; the parent writes each finished run whole, as it arrives."""
+    from joblib import Parallel, delayed, parallel_config
+
+    bar = _progress(sum(len(j.run_ids) for j in todo), progress)
+    with parallel_config(**config):
+        results = Parallel(return_as="generator_unordered")(delayed(execute)(job) for job in todo)
+        scene_of = {rid: j.scene for j in todo for rid in j.run_ids}
+        for run_id, params, result, error in itertools.chain.from_iterable(results):
+            if result is None:
+                result = error_result(scene_of[run_id], error)
+            store.write_run(run_id, params, result,
+                            {"wall_time": result.diagnostics.get("wall_time", 0.0)})
+            if result.ok:
+                report.done += 1
+            else:
+                report.failed += 1
+                report.failures.append((run_id, result.status, result.message.splitlines()[-1]
+                                        if result.message else ""))
+            bar.update(1)
+            bar.set_postfix(done=report.done, failed=report.failed)
+    bar.close()
+
+
+def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
+    """Adaptive sampling: a Latin-hypercube third of the budget, then rounds that put new
+    samples at the midpoints of the longest Delaunay edges joining points of different
+    phases (the boundaries), until the budget is spent or no boundary is left. Deterministic
+    for a given seed and results, so a rerun into the same file resumes the same rounds."""
+    from scipy.spatial import Delaunay
+
+    from .classify import phase
+    from .tabulate import summarize
+
+    names = list(sweep.axes)
+    lo = np.array([sweep.axes[k][0] for k in names])
+    span = np.array([sweep.axes[k][1] - sweep.axes[k][0] for k in names])
+    first = max(4, sweep.samples // 3)
+    unit = list(_lhs(sweep.axes, first, sweep.seed))
+    rng = np.random.default_rng(sweep.seed + 1)
+    phases: dict[str, str] = {}
+    while True:
+        jobs = []
+        for index, u in enumerate(unit):
+            point = {k: float(v) for k, v in zip(names, lo + np.asarray(u) * span)}
+            cfg = scene_for(scene, point)
+            jobs.append(Job([f"run-{index:05d}"], [point], cfg.plain()))
+        yield jobs
+        for job in jobs:
+            rid = job.run_ids[0]
+            if rid not in phases:
+                # a hold that ran out of time still has an informative shape; a blow-up has not
+                row = summarize(store.read_run(rid))
+                usable = row["status"] in ("ok", "not_converged")
+                phases[rid] = phase(row["alignment"]) if usable else "failed"
+        remaining = sweep.samples - len(unit)
+        if remaining <= 0:
+            return
+        labelled = [(np.asarray(u), phases[f"run-{i:05d}"]) for i, u in enumerate(unit)
+                    if phases[f"run-{i:05d}"] != "failed"]
+        size = min(remaining, max(2, first // 2))
+        if len(labelled) < len(names) + 2:
+            # too few usable points to triangulate: widen the coarse pass instead
+            unit.extend(rng.random((size, len(names))))
+            continue
+        pts = np.array([p for p, _ in labelled])
+        tri = Delaunay(pts)
+        edges = set()
+        for simplex in tri.simplices:
+            for a in range(len(simplex)):
+                for b in range(a + 1, len(simplex)):
+                    i, j = sorted((int(simplex[a]), int(simplex[b])))
+                    if labelled[i][1] != labelled[j][1]:
+                        edges.add((i, j))
+        if not edges:
+            return
+        ranked = sorted(edges, key=lambda e: -np.linalg.norm(pts[e[0]] - pts[e[1]]))
+        for i, j in ranked[:size]:
+            jitter = 0.05 * np.linalg.norm(pts[i] - pts[j]) * rng.standard_normal(len(names))
+            unit.append(np.clip(0.5 * (pts[i] + pts[j]) + jitter, 0.0, 1.0))
 
 
 def _progress(total: int, enabled: bool):

@@ -192,3 +192,23 @@ def test_continuation_shares_one_ramp_and_agrees_with_independent_runs(tmp_path)
     ok = table[table["status"] == "ok"]
     assert len(ok) >= 8
     assert np.abs(ok["link"] - ok["end_rotation_turns"]).max() < 1e-6
+
+
+def test_adaptive_sampling_refines_where_phases_differ(tmp_path):
+    # 10 samples: 4 on a Latin hypercube, then midpoints of edges joining different phases.
+    # Straight runs below the onset and buckled ones above it make a boundary to refine.
+    path = sweep_file(tmp_path, samples=10, sampler="adaptive", seed=1,
+                      extra={"solver.hold_max_time": 1.0})
+    data = yaml.safe_load(path.read_text())
+    data["sweep"]["axes"] = {"twist_density": [0.2, 1.0], "extension": [1.02, 1.06]}
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "a.h5"
+    result = cli("sweep", path, "-o", out, "--quiet", "--jobs", 2)
+    assert result.exit_code in (0, 1), result.output
+    assert result.output.count("Launching") >= 2  # at least one refinement round
+    cli("classify", out, "--csv", tmp_path / "a.csv")
+    table = pd.read_csv(tmp_path / "a.csv")
+    assert 4 < len(table) <= 10
+    # a rerun resumes the same rounds and launches nothing
+    again = cli("sweep", path, "-o", out, "--quiet")
+    assert "Launching 0 of" in again.output and again.output.count("Launching 0 of") == again.output.count("Launching")
