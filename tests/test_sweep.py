@@ -212,3 +212,23 @@ def test_adaptive_sampling_refines_where_phases_differ(tmp_path):
     # a rerun resumes the same rounds and launches nothing
     again = cli("sweep", path, "-o", out, "--quiet")
     assert "Launching 0 of" in again.output and again.output.count("Launching 0 of") == again.output.count("Launching")
+
+
+def test_run_then_every_plot_kind_and_a_movie(tmp_path):
+    out = tmp_path / "run.h5"
+    sets = [f"--set={k}={v}" for k, v in FAST.items()] + ["--set=loading.twist_density=0.5"]
+    result = cli("run", "twist_under_load", "-o", out, *sets)
+    assert result.exit_code == 0, result.output
+    assert "phase straight" in result.output and "link" in result.output
+    for kind in ("topology", "force", "shape"):
+        png = tmp_path / f"{kind}.png"
+        result = cli("plot", out, "--kind", kind, "-o", png)
+        assert result.exit_code == 0, result.output
+        assert png.stat().st_size > 5_000
+    result = cli("movie", out, "--run", "run", "-o", tmp_path / "run.gif", "--fps", 5)
+    assert result.exit_code == 0, result.output
+    written = result.output.split("written ")[-1].strip()
+    assert Path(written).stat().st_size > 5_000
+    # a phase map needs a classified sweep; a bad run id is a clear error
+    result = cli("movie", out, "--run", "nope", "-o", tmp_path / "x.gif")
+    assert result.exit_code == 2 and "nope" in result.output
