@@ -377,3 +377,112 @@ def test_contact_forces_are_the_gradient_of_the_contact_energy():
             xm[c, i] -= h
             numeric[c, i] = -(energy_and_force(xp)[0] - energy_and_force(xm)[0]) / (2 * h)
     assert np.abs(force - numeric).max() < 1e-6 * np.abs(force).max()
+
+
+def test_prescribed_end_displacement_records_the_reaction_force():
+    # Pulling the end by 10 % of L0 (displacement control) must need F = E A0 (1 - 1/e)
+    # with e = 1.1: the recorded reaction, to the equilibrium tolerance (1e-4 relative).
+    rod = Rod(length=1.0, radius=0.025, elements=20)
+    pull = 0.1
+    problem = Problem(rod=rod, state=straight_state(rod), ends=Ends(end_held=(True, True, True)),
+                      controls=Controls(end_displacement=ramp(0, 0.5, 0, pull)),
+                      solver=Solver(damping=40.0, tolerance=1e-6),
+                      stages=(Stage(0.5), Stage(10.0, until_equilibrium=True)))
+    result = simulate(problem)
+    assert result.ok, result.message
+    assert result.positions[-1, 2] == pytest.approx(1.0 + pull, abs=1e-12)  # exact, held
+    expected = rod.youngs_modulus * rod.area * (1 - 1 / (1 + pull))
+    assert result.history["end_force"][-1] == pytest.approx(expected, rel=1e-4)
+    assert result.history["end_displacement"][-1] == pytest.approx(pull, abs=1e-9)
+
+
+def test_modulus_ramp_shortens_a_loaded_rod_as_the_law_says():
+    # Constant load F; E ramps to 2E. Equilibrium extension then follows
+    # F = 2 E A0 (1 - 1/e), within the equilibrium tolerance.
+    rod = Rod(length=1.0, radius=0.025, elements=20)
+    force = 0.2 * rod.youngs_modulus * rod.area
+    problem = Problem(rod=rod, state=straight_state(rod),
+                      controls=Controls(end_force=constant(force), stiffness=ramp(0, 1.0, 1.0, 2.0)),
+                      solver=Solver(damping=40.0, tolerance=1e-6),
+                      stages=(Stage(1.0), Stage(10.0, until_equilibrium=True)))
+    result = simulate(problem)
+    assert result.ok, result.message
+    e = 1 / (1 - force / (2 * rod.youngs_modulus * rod.area))
+    assert result.positions[-1, 2] == pytest.approx(e, rel=1e-4)
+
+
+def twist_of(result):
+    """Twist per unit rest length of the element frames about a straight rod's axis [rad/m]."""
+    d1 = result.directors[:, 0]
+    angles = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
+    return np.diff(angles) / (result.rest_lengths[0])
+
+
+def test_radius_growth_keeps_a_times_rest_twist():
+    # A free rod with intrinsic twist k3 relaxes to twist k3; doubling its radius with
+    # a k3 fixed (the paper's muscle model) leaves it with twist k3/2 (to 1e-4 relative).
+    k3 = 5.0
+    rod = Rod(length=1.0, radius=0.02, elements=20, rest_curvature=(0.0, 0.0, k3))
+    problem = Problem(rod=rod, state=straight_state(rod),
+                      ends=Ends(start_held=(True, True, True), start_frame_held=True),
+                      controls=Controls(radius=ramp(0, 1.0, 1.0, 2.0)),
+                      solver=Solver(damping=40.0, tolerance=1e-7),
+                      stages=(Stage(1.0), Stage(20.0, until_equilibrium=True)))
+    result = simulate(problem)
+    assert result.ok, result.message
+    assert twist_of(result) == pytest.approx(k3 / 2, rel=1e-4)
+    assert result.radii == pytest.approx(2 * rod.radius, rel=1e-3)
+
+
+def test_local_rest_twist_over_a_segment():
+    # An "active agent" adding rest twist over nodes 5..15 of a free rod: the frames inside
+    # the segment twist by exactly that density, those outside do not.
+    rod = Rod(length=1.0, radius=0.02, elements=20)
+    extra = 3.0
+    problem = Problem(rod=rod, state=straight_state(rod),
+                      ends=Ends(start_held=(True, True, True), start_frame_held=True),
+                      controls=Controls(local_twist=constant(extra), segment=(5, 15)),
+                      solver=Solver(damping=40.0, tolerance=1e-7),
+                      stages=(Stage(20.0, until_equilibrium=True),))
+    result = simulate(problem)
+    assert result.ok, result.message
+    density = twist_of(result)  # Voronoi j sits at node j+1: nodes 6..14 are j = 5..13
+    inside = np.arange(5, 14)
+    outside = np.r_[np.arange(0, 4), np.arange(15, 19)]
+    assert density[inside] == pytest.approx(extra, rel=1e-4)
+    assert np.abs(density[outside]).max() < 1e-4 * extra
+
+
+def test_intrinsic_curvature_relaxes_to_a_circular_arc():
+    # A free rod with rest curvature k1 about d1 relaxes to an arc of radius 1/k1: all its
+    # nodes lie on that circle (to 1e-4 of the radius: equilibrium tolerance).
+    k1 = 2.0
+    rod = Rod(length=1.0, radius=0.01, elements=40, rest_curvature=(k1, 0.0, 0.0))
+    problem = Problem(rod=rod, state=straight_state(rod),
+                      ends=Ends(start_held=(True, True, True), start_frame_held=True),
+                      solver=Solver(damping=1.2, tolerance=1e-6),  # ~critical for the first mode
+                      stages=(Stage(60.0, until_equilibrium=True),))
+    result = simulate(problem)
+    assert result.ok, result.message
+    p = result.positions
+    # the arc lies in the plane normal to d1 (x); fit its centre on the normal through node 0
+    yz = p[:, 1:]
+    assert np.abs(p[:, 0]).max() < 1e-9
+    centre = np.array([yz[0, 0] + np.sign(yz[-1, 0] - yz[0, 0]) / k1, 0.0])
+    r = np.linalg.norm(yz - centre, axis=1)
+    assert r == pytest.approx(1 / k1, rel=1e-3)
+
+
+def test_friction_opposes_sliding_with_coulomb_magnitude():
+    x = np.ascontiguousarray(np.array([[-0.5, 0, 0], [0.5, 0, 0], [0, -0.5, 0.015],
+                                       [0, 0.5, 0.015]]).T)
+    v = np.zeros_like(x)
+    v[0, 2:] = 0.1  # the upper segment slides along +x
+    radius = np.full(3, 0.01)
+    force = np.zeros_like(x)
+    add_contact_forces(x, v, radius, np.array([[0], [2]]), 1, np.full(3, 1e4), np.zeros(3),
+                       1.0, 0.3, 1e-4, 0.0, force)
+    normal = 1e4 * 0.005
+    assert force[0, 2:].sum() == pytest.approx(-0.3 * normal)  # on the slider, against +x
+    assert force[0, :2].sum() == pytest.approx(0.3 * normal)
+    assert force[2, 2:].sum() == pytest.approx(normal)

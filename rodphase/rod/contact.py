@@ -188,7 +188,8 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
             continue
         touching += 1
         energy += 0.5 * scale * stiffness[i] * overlap * overlap
-        depth = overlap / min(radius[i], radius[j])
+        smaller = radius[i] if radius[i] < radius[j] else radius[j]
+        depth = overlap / smaller
         if depth > worst:
             worst = depth
             worst_element = i

@@ -249,9 +249,11 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         ends = stage.ends if stage.ends is not None else problem.ends
         ints, floats = _settings(problem, ends, dt, history_every, stage.until_equilibrium,
                                  settled, controls)
-        # held components stay where the stage finds them (plus the displacement control)
-        start_position = state.x[:, 0].copy()
-        end_position = state.x[:, n].copy()
+        # Held components stay where the stage finds them, plus the displacement control,
+        # when the stage has its own clock; on the run clock they are held from the start.
+        if own or index == 0:
+            start_position = state.x[:, 0].copy()
+            end_position = state.x[:, n].copy()
         table_t, table_v, table_n = _table_arrays(tables, shift)
         n_steps = int(math.ceil(stage.duration / dt - 1e-9))
         n_steps = min(n_steps, budget - steps_total)
