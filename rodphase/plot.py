@@ -68,8 +68,9 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
     x = twist density Φa ("twist_density"), y = extension L/L0 ("extension"); colour =
-    "alignment" (−1 plectoneme … +1 solenoid, NaN grey), marker = "phase"; runs whose
-    "status" is not "ok" are small black crosses. `experiments` (columns twist_density,
+    "alignment" (−1 plectoneme … +1 solenoid, NaN grey), marker = "phase"; runs whose hold
+    ran out of time ("not_converged") are drawn by their shape with a black dot; runs that
+    failed otherwise are small black crosses. `experiments` (columns twist_density,
     extension, kind ∈ {plectoneme, solenoid}, optional series) are overlaid in black:
     hollow for plectoneme onsets, solid for solenoid onsets, one marker shape per series.
     """
@@ -82,7 +83,8 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
     phase = phase.fillna("?").astype(str)
     alignment = (table["alignment"] if "alignment" in table
                  else pd.Series(np.nan, index=table.index)).astype(float)
-    ok = status == "ok"
+    ok = status.isin(["ok", "not_converged"])  # both have a shape to classify
+    creeping = status == "not_converged"
     norm = Normalize(-1.0, 1.0)
 
     with matplotlib.rc_context(STYLE):
@@ -101,6 +103,11 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
             face = "0.6" if name == "straight" else "0.9"  # straight is the grey of NaN
             handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc=face, mec="0.25",
                                   label=name if name != "?" else "unclassified"))
+        if creeping.any():
+            ax.scatter(table.loc[creeping, "twist_density"], table.loc[creeping, "extension"],
+                       marker=".", s=6, c="black", zorder=3)
+            handles.append(Line2D([], [], ls="", marker=".", ms=4, color="black",
+                                  label=f"not converged ({int(creeping.sum())})"))
         if (~ok).any():
             ax.scatter(table.loc[~ok, "twist_density"], table.loc[~ok, "extension"], marker="x",
                        s=18, c="black", linewidths=0.9, zorder=3)

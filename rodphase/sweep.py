@@ -272,7 +272,6 @@ def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
     for a given seed and results, so a rerun into the same file resumes the same rounds."""
     from scipy.spatial import Delaunay
 
-    from .classify import phase
     from .tabulate import summarize
 
     names = list(sweep.axes)
@@ -293,9 +292,7 @@ def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
             rid = job.run_ids[0]
             if rid not in phases:
                 # a hold that ran out of time still has an informative shape; a blow-up has not
-                row = summarize(store.read_run(rid))
-                usable = row["status"] in ("ok", "not_converged")
-                phases[rid] = phase(row["alignment"]) if usable else "failed"
+                phases[rid] = summarize(store.read_run(rid))["phase"]
         remaining = sweep.samples - len(unit)
         if remaining <= 0:
             return

@@ -19,7 +19,9 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
         return row | {"alignment": np.nan, "phase": "failed"}
     value = alignment(result.positions, radius, rest_length=rest_length, epsilon=epsilon)
     row["alignment"] = value
-    row["phase"] = phase(value, plectoneme_below, solenoid_above) if result.ok else "failed"
+    # a hold that ran out of time still has a shape (status says it crept); a blow-up has not
+    shaped = result.status in ("ok", "not_converged")
+    row["phase"] = phase(value, plectoneme_below, solenoid_above) if shaped else "failed"
     h = result.history
     row["end_rotation_turns"] = float(h["end_rotation"][-1] / (2 * np.pi))
     row["final_extension"] = float((rest_length + h["end_displacement"][-1]) / rest_length)

@@ -123,7 +123,7 @@ def test_killed_sweep_resumes_and_keeps_finished_runs_identical(tmp_path):
                 with h5py.File(out, "r", locking=False) as f:
                     finished = {r for r in f.get("runs", {}) if f["runs"][r].attrs.get("status") == "ok"
                                 or f["runs"][r].attrs.get("status")}
-            except (OSError, KeyError):
+            except Exception:  # the writer may be mid-flush: read again next time
                 continue
             if len(finished) >= 2:
                 break
