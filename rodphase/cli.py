@@ -165,8 +165,11 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
 @click.option("--run", "run_id", default=None, help="Run id for topology/force (default: first).")
 @click.option("--experiments", type=click.Path(exists=True, dir_okay=False),
               help="CSV of experimental points (twist_density, extension, kind) to overlay.")
+@click.option("--twist", type=click.Choice(["rest", "current"]), default="rest", show_default=True,
+              help="Phase map x axis: Φa with rest length and radius, or with the length and "
+              "radius of the stretched straight rod (Φa_rest / e^1.5).")
 @reports_errors
-def plot(store_file, kind, output, run_id, experiments):
+def plot(store_file, kind, output, run_id, experiments, twist):
     """Draw a figure from OUT.h5."""
     import pandas as pd
 
@@ -179,7 +182,9 @@ def plot(store_file, kind, output, run_id, experiments):
             if "phase" not in table:
                 raise C.ConfigError(store_file, "not classified", "run `rodphase classify` first")
             exp = pd.read_csv(experiments) if experiments else None
-            P.phase_map(table, output, experiments=exp)
+            column = "phi_a_current" if twist == "current" else (
+                "twist_density" if "twist_density" in table else "phi_a_rest")
+            P.phase_map(table, output, experiments=exp, x=column)
         elif kind == "shape":
             ids = store.run_ids()[:12]
             shapes = [(i, store.read_run(i).positions, store.read_run(i).rest_radius) for i in ids]

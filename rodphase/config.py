@@ -168,6 +168,9 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "twist_turns": (number(unit="turns", nullable=True), None),
         "twist_density": (number(unit="Phi*a, twist per rest length x rest radius",
                                  nullable=True), None),
+        "twist_density_current": (number(unit="Phi*a with the stretched length L = e L0 and "
+                                          "radius a0/sqrt(e) of the straight loaded rod",
+                                          nullable=True), None),
         "twist_rate": (number(0, strict_min=True, unit="turns/s"), 0.5),
     },
     "physics": {
@@ -239,6 +242,8 @@ SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
 # sweep axes in the paper's dimensionless units and where they go in the scene
 AXES = {
     "twist_density": (interval(-3.0, 3.0, "Phi*a"), "loading.twist_density"),
+    "twist_density_current": (interval(-3.0, 3.0, "Phi*a of the stretched rod"),
+                              "loading.twist_density_current"),
     "extension": (interval(1.0, 2.0, "L/L0"), "loading.extension"),
     "force_multiple": (interval(0.0, 1000.0, "F_C"), "loading.force_multiple"),
 }
@@ -284,9 +289,11 @@ def _check_scene_consistency(cfg: dict) -> None:
     if len(chosen) > 1:
         raise ConfigError("loading." + chosen[1], loading[chosen[1]],
                           "only one of force_multiple, force, extension")
-    if loading.twist_turns is not None and loading.twist_density is not None:
-        raise ConfigError("loading.twist_density", loading.twist_density,
-                          "only one of twist_turns, twist_density")
+    twists = [k for k in ("twist_turns", "twist_density", "twist_density_current")
+              if loading[k] is not None]
+    if len(twists) > 1:
+        raise ConfigError("loading." + twists[1], loading[twists[1]],
+                          "only one of twist_turns, twist_density, twist_density_current")
     rod = cfg["rod"]
     if rod.radius >= 0.5 * rod.length:
         raise ConfigError("rod.radius", rod.radius, f"less than half of rod.length ({rod.length:g} m)")
@@ -331,7 +338,18 @@ def twist_turns(cfg) -> float:
         return loading.twist_turns
     if loading.twist_density is not None:
         return loading.twist_density * rod.length / rod.radius / (2 * math.pi)
+    if loading.twist_density_current is not None:
+        # Φa_current = θ·(a0/√e)/(e·L0): the twist density of the straight stretched rod
+        return (loading.twist_density_current * rod.length * straight_extension(cfg) ** 1.5
+                / rod.radius / (2 * math.pi))
     return 0.0
+
+
+def straight_extension(cfg) -> float:
+    """L/L0 of the straight rod under the scene's constant load (1 without one)."""
+    force = load_force(cfg) or 0.0
+    area = math.pi * cfg["rod"].radius ** 2
+    return 1.0 / (1.0 - force / (cfg["material"].youngs_modulus * area))
 
 
 # ---------------------------------------------------------------- loading files
@@ -419,7 +437,8 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
         # the axis replaces whatever the scene said about the same control
         section, key = AXES[axis][1].split(".")
         scene_raw.setdefault(section, {})
-        for other in {"twist_density": ("twist_turns",),
+        for other in {"twist_density": ("twist_turns", "twist_density_current"),
+                      "twist_density_current": ("twist_turns", "twist_density"),
                       "extension": ("force", "force_multiple"),
                       "force_multiple": ("force", "extension")}[axis]:
             scene_raw[section].pop(other, None)
@@ -453,6 +472,9 @@ def validate_sweep(raw: Any) -> Frozen:
         if name not in AXES:
             raise _unknown("sweep.axes.", name, AXES)
         checked[name] = AXES[name][0](f"sweep.axes.{name}", span)
+    if "twist_density" in checked and "twist_density_current" in checked:
+        raise ConfigError("sweep.axes.twist_density_current", checked["twist_density_current"],
+                          "not together with twist_density (both set the twist)")
     if "extension" in checked and "force_multiple" in checked:
         raise ConfigError("sweep.axes.force_multiple", checked["force_multiple"],
                           "not together with extension (both set the load)")

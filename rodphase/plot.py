@@ -64,16 +64,18 @@ def _save(fig: Figure, path) -> Path:
 
 
 def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = None,
-              title: str | None = None) -> Path:
+              title: str | None = None, x: str = "twist_density") -> Path:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
-    x = twist density Φa ("twist_density"), y = extension L/L0 ("extension"); colour =
+    x = twist density Φa (column `x`: "twist_density", or "phi_a_rest" / "phi_a_current"
+    of the classified table), y = extension L/L0 ("extension"); colour =
     "alignment" (−1 plectoneme … +1 solenoid, NaN grey), marker = "phase"; runs whose hold
     ran out of time ("not_converged") are drawn by their shape with a black dot; runs that
     failed otherwise are small black crosses. `experiments` (columns twist_density,
     extension, kind ∈ {plectoneme, solenoid}, optional series) are overlaid in black:
     hollow for plectoneme onsets, solid for solenoid onsets, one marker shape per series.
     """
+    table = table.rename(columns={x: "twist_density"}) if x != "twist_density" else table
     missing = [c for c in ("twist_density", "extension") if c not in table.columns]
     if missing:
         raise ValueError(f"phase_map needs columns {missing}; the table has {list(table.columns)}")
@@ -116,7 +118,8 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
         if experiments is not None and len(experiments):
             handles += _experiments(ax, experiments)
 
-        ax.set_xlabel(TWIST_DENSITY_LABEL)
+        ax.set_xlabel(TWIST_DENSITY_LABEL if x != "phi_a_current" else
+                      r"twist density $\Phi a$ of the stretched rod (rad)")
         ax.set_ylabel(r"extension $L/L_0$")
         if title:
             ax.set_title(title)

@@ -179,15 +179,17 @@ def plan(sweep, scene) -> list[Job]:
         checked.append((f"run-{index:05d}", dict(point), cfg))
     if sweep.sampler != "continuation":
         return [Job([rid], [p], cfg.plain()) for rid, p, cfg in checked]
-    if "twist_density" not in sweep.axes:
-        raise C.ConfigError("sweep.sampler", "continuation", "a sweep with a twist_density axis")
+    twist_axis = next((a for a in ("twist_density", "twist_density_current") if a in sweep.axes),
+                      None)
+    if twist_axis is None:
+        raise C.ConfigError("sweep.sampler", "continuation", "a sweep with a twist density axis")
     groups: dict[tuple, list] = {}
     for rid, point, cfg in checked:
-        key = tuple(sorted((k, v) for k, v in point.items() if k != "twist_density"))
+        key = tuple(sorted((k, v) for k, v in point.items() if k != twist_axis))
         groups.setdefault(key, []).append((rid, point, cfg))
     jobs = []
     for members in groups.values():
-        members.sort(key=lambda m: m[1]["twist_density"])
+        members.sort(key=lambda m: m[1][twist_axis])
         jobs.append(Job([m[0] for m in members], [m[1] for m in members], members[0][2].plain(),
                         twist_targets=[C.twist_turns(m[2]) for m in members]))
     return jobs

@@ -24,6 +24,12 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     row["phase"] = phase(value, plectoneme_below, solenoid_above) if shaped else "failed"
     h = result.history
     row["end_rotation_turns"] = float(h["end_rotation"][-1] / (2 * np.pi))
+    # twist density with rest length and radius, and of the straight stretched rod
+    # (L = e L0, a = a0/√e, e from the applied load): papers use either
+    row["phi_a_rest"] = float(h["end_rotation"][-1] * radius / rest_length)
+    stiffness = d.get("youngs_modulus", np.nan) * np.pi * radius**2
+    e_load = 1.0 / (1.0 - float(h["applied_force"][-1]) / stiffness)
+    row["phi_a_current"] = row["phi_a_rest"] / e_load**1.5
     row["final_extension"] = float((rest_length + h["end_displacement"][-1]) / rest_length)
     row["end_force"] = float(h["end_force"][-1])
     for key in ("link", "twist", "writhe"):

@@ -130,3 +130,13 @@ def test_config_is_read_only():
     cfg = C.validate_scene(SCENE, SCENES)
     with pytest.raises(TypeError):
         cfg.rod["radius"] = 1.0
+
+
+def test_twist_density_of_the_stretched_rod():
+    # Φa with L = e L0 and a = a0/√e: the same end rotation reads e^1.5 smaller
+    cfg = C.validate_scene(with_(with_(SCENE, "loading.extension", 1.16),
+                                 "loading.twist_density_current", 1.2), SCENES)
+    assert C.twist_turns(cfg) == pytest.approx(1.2 * 1.16**1.5 / 0.025 / (2 * math.pi))
+    with pytest.raises(C.ConfigError, match="only one of"):
+        C.validate_scene(with_(with_(SCENE, "loading.twist_density", 1.0),
+                               "loading.twist_density_current", 1.2), SCENES)
