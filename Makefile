@@ -24,7 +24,7 @@ demo: $(STAMP)  ## run configs/quick.yaml (a small phase diagram) and draw its p
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/quick.yaml -o $(OUT)/quick.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/quick.h5 --csv $(OUT)/quick.csv
-	$(BIN)/rodphase plot $(OUT)/quick.h5 --kind phase -o $(OUT)/quick_phase.png
+	$(BIN)/rodphase plot $(OUT)/quick.h5 --kind phase --twist current -o $(OUT)/quick_phase.png
 	@echo "phase map: $(OUT)/quick_phase.png  data: $(OUT)/quick.h5  table: $(OUT)/quick.csv"
 
 test: $(STAMP)  ## run the test suite
