@@ -486,3 +486,16 @@ def test_friction_opposes_sliding_with_coulomb_magnitude():
     assert force[0, 2:].sum() == pytest.approx(-0.3 * normal)  # on the slider, against +x
     assert force[0, :2].sum() == pytest.approx(0.3 * normal)
     assert force[2, 2:].sum() == pytest.approx(normal)
+
+
+def test_friction_with_several_pairs_leaves_the_normal_springs_alone():
+    # Regression: the friction coefficient once overwrote the stiffness scale for the pairs
+    # after the first; the same overlapping pair listed twice must give twice the force.
+    x = np.ascontiguousarray(np.array([[-0.5, 0, 0], [0.5, 0, 0], [0, -0.5, 0.015],
+                                       [0, 0.5, 0.015]]).T)
+    v = np.zeros_like(x)
+    v[0, 2:] = 0.1
+    force = np.zeros_like(x)
+    add_contact_forces(x, v, np.full(3, 0.01), np.array([[0, 0], [2, 2]]), 2, np.full(3, 1e4),
+                       np.zeros(3), 1.0, 0.3, 1e-4, 0.0, force)
+    assert force[2, :2].sum() == pytest.approx(-2 * 1e4 * 0.005)

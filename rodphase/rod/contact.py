@@ -229,10 +229,10 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
             t2 = rv2 - vn * n2
             vt = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
             # Regularised Coulomb: viscous below the slip speed so that sticking does not chatter.
-            scale = friction * fn / max(vt, slip_speed)
-            f0 -= scale * t0
-            f1 -= scale * t1
-            f2 -= scale * t2
+            slide = friction * fn / max(vt, slip_speed)
+            f0 -= slide * t0
+            f1 -= slide * t1
+            f2 -= slide * t2
         force[0, i] += (1.0 - s) * f0
         force[1, i] += (1.0 - s) * f1
         force[2, i] += (1.0 - s) * f2

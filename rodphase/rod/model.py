@@ -247,8 +247,12 @@ def stable_time_step(rod: Rod, contact: Contact, stiffness_factor: float = 1.0,
 
     ω_max² sums the chain mode of the stiffest wave speed c over an element, (2c/l)², the
     rotation of a section against its shear, 16G/(3ρa²) (the shear couple S1·l over the
-    rotational inertia ρI1·l), and, with contact, the pair spring over an element mass with
-    up to four partners at once. Stretching only lengthens elements, so rest values bound it.
+    rotational inertia ρI1·l), and, with contact, the pair springs k = κ·E·l over an element
+    mass ρ·A·l. In dense contact (a plectoneme, a solenoid) an element presses on the elements
+    of the neighbouring strand within about two radii, 2 + 4a/l of them, so that term grows
+    as elements get shorter than the radius: measured, a plectoneme at 100 elements was
+    stable only to 0.43x the bound without it. Stretching only lengthens elements, so rest
+    values bound the rest.
     """
     c_axial, c_shear = wave_speeds(rod, stiffness_factor)
     c = max(c_axial, c_shear)
@@ -257,8 +261,11 @@ def stable_time_step(rod: Rod, contact: Contact, stiffness_factor: float = 1.0,
     g = rod.shear_modulus * stiffness_factor
     omega2 = (2.0 * c / l0) ** 2 + 16.0 * g / (3.0 * rod.density * a * a)
     if contact.enabled:
-        omega2 += 4.0 * contact.stiffness * rod.youngs_modulus * stiffness_factor / (
+        partners = 2.0 + 4.0 * rod.radius * max(radius_factor, 1.0) / l0
+        spring = partners * contact.stiffness * rod.youngs_modulus * stiffness_factor / (
             rod.density * rod.area * radius_factor**2)
+        # the explicit dashpot (ratio ζ of the pair springs) takes its share of the step too
+        omega2 += spring * (1.0 + contact.damping_ratio) ** 2
     return 2.0 / math.sqrt(omega2)
 
 

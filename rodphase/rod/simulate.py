@@ -204,6 +204,21 @@ def _local_mask(n: int, segment: tuple[int, int]) -> np.ndarray:
     return mask
 
 
+def _refused(problem: Problem, dt: float, bound: float, message: str) -> RunResult:
+    state = problem.state
+    n = problem.rod.elements
+    history = {name: np.zeros(0) for name in HISTORY_COLUMNS}
+    history["stage"] = np.zeros(0, dtype=np.int64)
+    return RunResult(status="unstable", message=message, positions=state.positions,
+                     directors=state.directors, radii=np.full(n, problem.rod.radius),
+                     rest_lengths=np.full(n, problem.rod.element_length), history=history,
+                     snapshot_positions=np.zeros((0, n + 1, 3)), snapshot_d1=np.zeros((0, n, 3)),
+                     diagnostics={"dt": dt, "dt_bound": bound, "steps": 0, "wall_time": 0.0,
+                                  "us_per_step": 0.0, "rest_radius": problem.rod.radius,
+                                  "rest_length": problem.rod.length, "elements": n,
+                                  "youngs_modulus": problem.rod.youngs_modulus, "stages": []})
+
+
 def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool = False) -> RunResult:
     """Advance `problem.state` through `problem.stages` and return a RunResult.
 
@@ -222,6 +237,12 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                 f"{n} elements; the run will likely go unstable")
         warnings.warn(note, stacklevel=2)
         notes.append(note)
+        if problem.solver.quadratic_drag > 0.0:
+            # The speed-dependent drag caps speeds near 1/(drag·dt): an explicit instability
+            # then rings without ever tripping the guard, so such a run is never started.
+            return _refused(problem, dt, bound, f"{note}; with solver.quadratic_drag > 0 the "
+                            "guard cannot see the blow-up, so the run was not started. Use "
+                            "solver.dt: auto, a dt below the bound, or quadratic_drag: 0.")
     history_every = max(1, int(round(problem.solver.history_interval / dt)))
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
