@@ -8,7 +8,7 @@ its experiment needs. Orientation: the rod starts at the origin along +z; the st
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial.transform import Rotation

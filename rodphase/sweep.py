@@ -11,16 +11,15 @@ import itertools
 import math
 import time
 import traceback
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Iterator
 
 import numpy as np
 
 from . import __version__
 from . import config as C
 from .result import RunResult
-
 
 # ---------------------------------------------------------------- samplers
 

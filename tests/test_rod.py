@@ -11,8 +11,21 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from rodphase.rod import (Contact, Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp,
-                          simulate, stable_time_step, straight_state, time_step)
+from rodphase.rod import (
+    Contact,
+    Controls,
+    Ends,
+    Problem,
+    Rod,
+    Solver,
+    Stage,
+    constant,
+    ramp,
+    simulate,
+    stable_time_step,
+    straight_state,
+    time_step,
+)
 from rodphase.rod import kernel as K
 from rodphase.rod.contact import add_contact_forces, brute_force_pairs, build_pairs
 from rodphase.rod.simulate import _rod_arrays

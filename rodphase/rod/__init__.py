@@ -1,7 +1,20 @@
 """The rod engine: compiled kernel (kernel.py, contact.py), problem data (model.py), driver."""
 
-from .model import (Contact, Controls, Ends, Problem, Rod, RodState, Solver, Stage, constant, ramp,
-                    stable_time_step, state_from, straight_state)
+from .model import (
+                    Contact,
+                    Controls,
+                    Ends,
+                    Problem,
+                    Rod,
+                    RodState,
+                    Solver,
+                    Stage,
+                    constant,
+                    ramp,
+                    stable_time_step,
+                    state_from,
+                    straight_state,
+)
 from .simulate import simulate, time_step
 
 __all__ = ["Contact", "Controls", "Ends", "Problem", "Rod", "RodState", "Solver", "Stage",

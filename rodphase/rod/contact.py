@@ -7,15 +7,9 @@ the list could have come into contact. All arrays are structure-of-arrays: (3, n
 """
 
 import numpy as np
-from numba import njit as _njit
 
-
-def njit(*args, **kwargs):
-    # error_model="numpy": no zero-division checks inside loops, so LLVM can vectorise them
-    kwargs.setdefault("error_model", "numpy")
-    return _njit(*args, **kwargs)
-
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}  # never 'nnan': the guard needs NaN checks
+from ._jit import FASTMATH as _FASTMATH
+from ._jit import njit
 
 
 @njit(cache=True, inline="always")

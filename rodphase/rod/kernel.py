@@ -22,17 +22,10 @@ applied before the boundary conditions so that prescribed motions are exact.
 """
 
 import numpy as np
-from numba import njit as _njit
 
-
-def njit(*args, **kwargs):
-    # error_model="numpy": no zero-division checks inside loops, so LLVM can vectorise them
-    kwargs.setdefault("error_model", "numpy")
-    return _njit(*args, **kwargs)
-
+from ._jit import FASTMATH as _FASTMATH
+from ._jit import njit
 from .contact import add_contact_forces, build_pairs
-
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}  # never 'nnan': the guard needs NaN checks
 
 # integer settings
 I_INCOMPRESSIBLE = 0

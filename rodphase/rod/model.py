@@ -196,7 +196,7 @@ class RodState:
         """(n, 3, 3): directors[i, r] is d_{r+1} of element i in the lab frame."""
         return np.ascontiguousarray(np.transpose(self.Q, (2, 0, 1)))
 
-    def copy(self) -> "RodState":
+    def copy(self) -> RodState:
         return RodState(self.time, self.x.copy(), self.v.copy(), self.Q.copy(), self.w.copy())
 
 
