@@ -241,6 +241,42 @@ def force_displacement(history: dict | RunResult, path, *, stage: int | None = N
 
 # --- rod shapes ---------------------------------------------------------------------------
 
+def control_response(history: dict | RunResult, path, *, title: str | None = None) -> Path:
+    """Response to a material control (paper Fig 4b, 4c): end displacement ΔU and the changes
+    ΔWr, ΔTw against the control that moves (stiffness factor E/E0, else radius factor a/a0),
+    from the first row where it starts to move."""
+    history = history.history if isinstance(history, RunResult) else history
+    control = next((k for k in ("stiffness_factor", "radius_factor")
+                    if np.ptp(np.asarray(history.get(k, [1.0]))) > 0), None)
+    if control is None:
+        raise ValueError("neither stiffness_factor nor radius_factor changes in this history")
+    x = np.asarray(history[control])
+    start = max(int(np.argmax(x != x[0])) - 1, 0)
+    label = {"stiffness_factor": r"stiffness $E/E_0$", "radius_factor": r"radius $a/a_0$"}[control]
+    with matplotlib.rc_context(STYLE):
+        fig = _figure(figsize=(5.2, 3.6))
+        ax = fig.add_subplot()
+        u = np.asarray(history["end_displacement"])
+        ax.plot(x[start:], 1e3 * (u[start:] - u[start]), color=BLACK, lw=1.8,
+                label=r"end displacement $\Delta U$")
+        ax.set_xlabel(label)
+        ax.set_ylabel(r"$\Delta U$ (mm)")
+        handles = ax.get_legend_handles_labels()[0]
+        if "writhe" in history:
+            twin = ax.twinx()
+            for key, colour, style, name in (("writhe", VERMILLION, "-.", r"$\Delta Wr$"),
+                                             ("twist", BLUE, "--", r"$\Delta Tw$")):
+                y = np.asarray(history[key])
+                twin.plot(x[start:], y[start:] - y[start], color=colour, ls=style, lw=1.5,
+                          label=name)
+            twin.set_ylabel("turns")
+            handles += twin.get_legend_handles_labels()[0]
+        ax.legend(handles=handles, frameon=False, loc="best")
+        if title:
+            ax.set_title(title)
+        return _save(fig, path)
+
+
 def _upright(positions: np.ndarray, axis: np.ndarray | None = None) -> np.ndarray:
     """Rotate points so that `axis` (default: first node → last node) points up (+z)."""
     if axis is None:

@@ -105,3 +105,17 @@ def test_movie_falls_back_to_gif_without_ffmpeg(tmp_path, monkeypatch):
     frames = np.stack([helix(turns=t) for t in np.linspace(0, 1, 3)])
     out = plot.movie(frames, 0.025, tmp_path / "rod.mp4")
     assert out == tmp_path / "rod.gif" and out.stat().st_size > 0
+
+
+def test_control_response_draws_a_radius_ramp(tmp_path):
+    from rodphase.plot import control_response
+
+    t = np.linspace(0, 1, 30)
+    history = {"radius_factor": np.r_[np.ones(5), np.linspace(1, 2, 25)],
+               "stiffness_factor": np.ones(30), "end_displacement": -0.01 * t,
+               "writhe": 0.2 * t, "twist": -0.3 * t}
+    path = control_response(history, tmp_path / "r.png")
+    assert path.stat().st_size > 5_000
+    with pytest.raises(ValueError, match="neither"):
+        control_response({"radius_factor": np.ones(3), "end_displacement": np.zeros(3)},
+                         tmp_path / "x.png")
