@@ -503,9 +503,10 @@ def report(machine, source_info, rows, extra, args, total) -> str:
                     if machine["cpu_share"] < 0.95 else "."))
     why = ""
     if DAMPING > 20.0 or ROTATIONAL_FACTOR > 1.0:
-        why = (" (with the scene's 20/s and 1 ×, this plectoneme does not settle in rodphase at "
-               "n ≥ 200: its kinetic energy grows under contact, and runs at n ≥ 300 stop as "
-               "unstable; the heavier damping keeps the timed state a held plectoneme)")
+        why = (" (heavier than rodphase's scene defaults, so that both codes, PyElastica "
+               "having no speed-dependent drag, hold the same plectoneme while timed; this "
+               "choice predates the contact-thinning and contact time-step fixes, which cured "
+               "the energy growth seen then at n ≥ 200 with 20/s)")
     lines.append("")
     lines.append(
         f"Scene: L0 = {LENGTH:g} m, a = {RADIUS:g} m, E = {YOUNG:.0e} Pa, G = 2E/3, "
