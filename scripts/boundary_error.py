@@ -1,0 +1,50 @@
+"""Phase-boundary error against run count: adaptive vs random sampling of the Fig 3 box.
+
+    python scripts/boundary_error.py REFERENCE.csv RANDOM.csv ADAPTIVE.csv
+
+Each CSV is a classified table (`rodphase classify X.h5 --csv X.csv`) over the same box:
+the reference a dense grid (configs/fig3_grid.yaml), the others the first k runs of a
+random sweep (configs/fig3_phase.yaml) and of an adaptive one (configs/fig3_adaptive.yaml).
+The error of k samples is the fraction of reference points whose phase the nearest of the
+k samples (in coordinates scaled to the box) gets wrong: the area misplaced by the
+boundary the k samples imply. Prints a Markdown table.
+"""
+
+import sys
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
+
+AXES = ("twist_density", "extension")
+
+
+def scaled(table: pd.DataFrame, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
+    return (table[list(AXES)].to_numpy(float) - lo) / span
+
+
+def error(reference: pd.DataFrame, samples: pd.DataFrame, lo, span) -> float:
+    usable = samples[samples["phase"] != "failed"]
+    tree = cKDTree(scaled(usable, lo, span))
+    _, nearest = tree.query(scaled(reference, lo, span))
+    guessed = usable["phase"].to_numpy()[nearest]
+    return float(np.mean(guessed != reference["phase"].to_numpy()))
+
+
+def main(reference_csv, random_csv, adaptive_csv) -> None:
+    reference = pd.read_csv(reference_csv)
+    lo = reference[list(AXES)].min().to_numpy(float)
+    span = reference[list(AXES)].max().to_numpy(float) - lo
+    random = pd.read_csv(random_csv).sort_values("run_id")
+    adaptive = pd.read_csv(adaptive_csv).sort_values("run_id")
+    print("| runs | random: boundary error | adaptive: boundary error |")
+    print("|---|---|---|")
+    for k in range(10, len(adaptive) + 1, 10):
+        print(f"| {k} | {error(reference, random.head(k), lo, span):.3f} | "
+              f"{error(reference, adaptive.head(k), lo, span):.3f} |")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4:
+        sys.exit(__doc__)
+    main(*sys.argv[1:])
