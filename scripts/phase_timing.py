@@ -35,6 +35,8 @@ import sys
 import time
 from pathlib import Path
 
+from _common import machine, write_block
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "perf"
 RODPHASE = str(Path(sys.executable).with_name("rodphase"))
@@ -46,13 +48,6 @@ def load_text() -> str:
     return "{:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
 
 
-def machine() -> dict:
-    cpu = "unknown"
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            cpu = line.split(":", 1)[1].strip()
-            break
-    return {"cpu": cpu, "nproc": os.cpu_count()}
 
 
 def other_processes() -> list[str]:
@@ -284,7 +279,6 @@ def compare(write: Path | None) -> str:
     print(text)
     plot_maps(fast, ref, state)
     if write:
-        from stability_map import write_block
 
         m = machine()
         busy = state["timing"].get("others_before") or []
@@ -348,8 +342,7 @@ def main():
         text = savings_table(json.loads(_state_path("savings").read_text()))
         print(text)
         if args.write:
-            from stability_map import write_block
-
+    
             write_block(args.write, "savings", text)
     elif args.step == "reference":
         info = run_sweep("reference", OUT / "fig3_ref.h5",

@@ -49,6 +49,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from _common import machine, write_block
 from scipy.spatial.transform import Rotation
 
 from rodphase.rod import (
@@ -67,13 +68,6 @@ from rodphase.rod import (
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def machine() -> dict:
-    cpu = "unknown"
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            cpu = line.split(":", 1)[1].strip()
-            break
-    return {"cpu": cpu, "nproc": os.cpu_count(), "load": os.getloadavg()}
 
 
 def load_text() -> str:
@@ -368,18 +362,6 @@ def plot(data: dict, path: Path) -> None:
     print(f"wrote {path}")
 
 
-def write_block(doc: Path, name: str, text: str) -> None:
-    """Replace the text between <!-- name:begin --> and <!-- name:end --> in `doc`."""
-    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
-    body = doc.read_text() if doc.exists() else ""
-    if begin in body and end in body:
-        head, rest = body.split(begin, 1)
-        _, tail = rest.split(end, 1)
-        body = f"{head}{begin}\n{text}\n{end}{tail}"
-    else:
-        body += f"\n{begin}\n{text}\n{end}\n"
-    doc.write_text(body)
-    print(f"updated {doc} ({name})")
 
 
 def main():

@@ -42,6 +42,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine, write_block
 
 from rodphase.rod import (
     Controls,
@@ -67,13 +68,6 @@ def load_text() -> str:
     return "{:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
 
 
-def machine() -> dict:
-    cpu = "unknown"
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            cpu = line.split(":", 1)[1].strip()
-            break
-    return {"cpu": cpu, "nproc": os.cpu_count()}
 
 
 def timed(problem: Problem, **kwargs):
@@ -313,17 +307,6 @@ def plot(data: dict, path: Path) -> None:
     print(f"wrote {path}")
 
 
-def write_block(doc: Path, name: str, text: str) -> None:
-    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
-    body = doc.read_text() if doc.exists() else ""
-    if begin in body and end in body:
-        head, rest = body.split(begin, 1)
-        _, tail = rest.split(end, 1)
-        body = f"{head}{begin}\n{text}\n{end}{tail}"
-    else:
-        body += f"\n{begin}\n{text}\n{end}\n"
-    doc.write_text(body)
-    print(f"updated {doc} ({name})")
 
 
 def main():
