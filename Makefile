@@ -6,10 +6,10 @@ STAMP   = $(VENV)/.installed
 OUT    ?= out
 JOBS   ?= 2
 
-.PHONY: help install demo test lint bench figures phase clean
+.PHONY: help install demo test lint bench figures phase fig3 clean
 
 help:  ## list the targets
-	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-9s %s\n", $$1, $$2}'
+	@grep -hE '^[A-Za-z0-9 -]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-9s %s\n", $$1, $$2}'
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -38,14 +38,23 @@ bench: $(STAMP)  ## kernel and topology benchmarks against PyElastica (installs 
 	$(BIN)/python scripts/bench_kernel.py --write docs/benchmarks.md
 	$(BIN)/python scripts/bench_topology.py
 
-phase: $(STAMP)  ## the paper's Fig 3 phase diagram (configs/fig3_phase.yaml)
+phase: $(STAMP)  ## the DESIGN's Fig 3 box, rest twist axis (configs/fig3_phase.yaml)
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_phase.yaml -o $(OUT)/fig3.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3.h5 --csv $(OUT)/fig3.csv
 	$(BIN)/rodphase plot $(OUT)/fig3.h5 --kind phase -o $(OUT)/fig3_phase.png
 
-figures: $(STAMP)  ## every figure of the paper (see docs/reproduction.md)
+fig3: $(STAMP)  ## the paper's Fig 3 in its twist axis, with the Phi_c fit (~5 min on 2 cores)
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase sweep configs/fig3_paper.yaml -o $(OUT)/fig3_paper.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/rodphase classify $(OUT)/fig3_paper.h5 --csv $(OUT)/fig3_paper.csv
+	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase --twist current -o $(OUT)/fig3_paper.png
+	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
+
+figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)
 	$(BIN)/python scripts/figures.py --out $(OUT) --jobs $(JOBS)
 
 clean:  ## remove outputs (keeps .venv)
 	rm -rf $(OUT) .pytest_cache
+
+include scripts/figures.mk
