@@ -447,6 +447,21 @@ def test_radius_growth_keeps_a_times_rest_twist():
     assert result.radii == pytest.approx(2 * rod.radius, rel=1e-3)
 
 
+def test_growing_rod_does_not_touch_its_own_neighbours():
+    # A straight rod whose radius triples with contact on: capsules a few elements apart
+    # along the rod overlap once a > l, and must stay excluded at the grown radius (the
+    # exclusion is set from the largest radius of any stage), so nothing ever touches.
+    rod = Rod(length=1.0, radius=0.02, elements=40)
+    problem = Problem(rod=rod, state=straight_state(rod),
+                      ends=Ends(start_held=(True, True, True), start_frame_held=True),
+                      controls=Controls(radius=ramp(0, 0.5, 1.0, 3.0)),
+                      contact=Contact(enabled=True), stages=(Stage(0.6),))
+    result = simulate(problem)
+    assert result.ok, result.message
+    assert result.history["contacts"].max() == 0
+    assert np.abs(result.positions[:, :2]).max() < 1e-9  # no spurious push off the z axis
+
+
 def test_local_rest_twist_over_a_segment():
     # An "active agent" adding rest twist over nodes 5..15 of a free rod: the frames inside
     # the segment twist by exactly that density, those outside do not.

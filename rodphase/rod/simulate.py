@@ -43,9 +43,13 @@ def _table_extreme(table: Table, pick) -> float:
     return float(pick(table[1]))
 
 
+def _all_controls(problem: Problem) -> list[Controls]:
+    return [problem.controls] + [s.controls for s in problem.stages if s.controls is not None]
+
+
 def time_step(problem: Problem) -> tuple[float, float]:
     """(dt, stable bound) for the problem: the user's dt or safety × the bound over all stages."""
-    controls = [problem.controls] + [s.controls for s in problem.stages if s.controls is not None]
+    controls = _all_controls(problem)
     stiff = max(_table_extreme(c.stiffness, max) for c in controls)
     grow = min(_table_extreme(c.radius, min) for c in controls)
     bound = stable_time_step(problem.rod, problem.contact, stiff, grow)
@@ -98,7 +102,11 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     ints = np.zeros(k.N_INTS, dtype=np.int64)
     ints[k.I_INCOMPRESSIBLE] = rod.incompressible
     ints[k.I_CONTACT] = contact.enabled
-    ints[k.I_EXCLUSION] = max(1, math.ceil(contact.exclusion * rod.radius / rod.element_length))
+    # Neighbours along the rod closer than `exclusion` radii always overlap as capsules; they
+    # are excluded at the largest radius any stage grows to, or a growing rod (the muscle)
+    # would push apart elements a few apart along it as if they touched.
+    grown = max(_table_extreme(c.radius, max) for c in _all_controls(problem))
+    ints[k.I_EXCLUSION] = max(1, math.ceil(contact.exclusion * rod.radius * grown / rod.element_length))
     ints[k.I_START_HELD:k.I_START_HELD + 3] = ends.start_held
     ints[k.I_START_FRAME_HELD] = ends.start_frame_held
     ints[k.I_END_HELD:k.I_END_HELD + 3] = ends.end_held
