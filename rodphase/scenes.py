@@ -140,8 +140,9 @@ def stiffening(cfg) -> Problem:
 def helix_state(radius: float, pitch: float, loops: float, n: int, handedness: int,
                 twist_per_length: float):
     """Nodes (n+1, 3) and directors (n, 3, 3) of a helix along +z starting at the origin's
-    side, d3 along each segment, d1 towards the axis, then turned about d3 by the inserted
-    twist (rad per unit length). Returns (positions, directors, length)."""
+    side, d3 along each segment, d1 turned about d3 from the inward normal so that the
+    fibre's own twist density κ3 = d1'·d2 equals `twist_per_length` (rad/m). Returns
+    (positions, directors, length)."""
     c = pitch / TURN
     per_loop = TURN * math.hypot(radius, c)
     length = loops * per_loop
@@ -156,7 +157,12 @@ def helix_state(radius: float, pitch: float, loops: float, n: int, handedness: i
     d1 = inward - np.sum(inward * t, axis=1)[:, None] * t
     d1 /= np.linalg.norm(d1, axis=1)[:, None]
     d2 = np.cross(t, d1)
-    psi = twist_per_length * 0.5 * (s[1:] + s[:-1])
+    # The inward normal already turns about the tangent at the helix's torsion
+    # c/(R² + c²) (signed by handedness); the inserted twist is the fibre's twist, so the
+    # frame is turned back by the torsion. Without this a homochiral fibre would carry
+    # inserted + torsion and a heterochiral one inserted − torsion.
+    torsion = handedness * c / (radius**2 + c**2)
+    psi = (twist_per_length - torsion) * 0.5 * (s[1:] + s[:-1])
     c_, s_ = np.cos(psi)[:, None], np.sin(psi)[:, None]
     directors = np.stack([c_ * d1 + s_ * d2, -s_ * d1 + c_ * d2, t], axis=1)
     return x, directors, length
