@@ -195,6 +195,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
         "hold_tolerance": (number(0, 1, strict_min=True), 1e-3),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
+        # a hold also ends once the window-mean shape moves < hold_tolerance × L0 per window
+        "settle_window": (number(0, unit="s; 0 = residual test only"), 0.5),
         "max_steps": (number(1, integer=True, nullable=True), None),
     },
     "output": {

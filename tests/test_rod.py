@@ -4,6 +4,7 @@ Each tolerance says why it is that number. Rods are coarse and runs short so the
 seconds once numba's cache is warm.
 """
 
+import dataclasses
 import math
 import warnings
 
@@ -460,6 +461,34 @@ def test_growing_rod_does_not_touch_its_own_neighbours():
     assert result.ok, result.message
     assert result.history["contacts"].max() == 0
     assert np.abs(result.positions[:, :2]).max() < 1e-9  # no spurious push off the z axis
+
+
+def test_a_slow_oscillation_is_not_taken_for_a_settled_shape():
+    # A lightly damped cantilever swinging about its deflected shape (tip amplitude 1 cm,
+    # 5 % of its length) with the settle window set to exactly its period: consecutive
+    # window means then agree (checked below, so the test's premise holds), but the shape
+    # is not at rest, and the spread within the window must keep the hold going.
+    rod = Rod(length=0.2, radius=0.01, elements=10)
+    load = 3 * rod.bending_stiffness * 0.01 / rod.length**3  # static tip deflection ≈ 1 cm
+    solver = Solver(damping=0.02, rotational_damping=0.02, tolerance=1e-3, history_interval=1e-3)
+
+    def swing(stage, **settle):
+        problem = Problem(rod=rod, state=straight_state(rod),
+                          controls=Controls(end_force=constant(load), force_direction=(1, 0, 0)),
+                          solver=dataclasses.replace(solver, **settle), stages=(stage,))
+        return simulate(problem)
+
+    free = swing(Stage(3.0))
+    tip = free.snapshot_positions[:, -1, 0]
+    t = free.history["time"]
+    up = np.where((tip[:-1] < tip.mean()) & (tip[1:] >= tip.mean()))[0]
+    period = float(np.mean(np.diff(t[up])))
+    windows = [tip[(t >= a) & (t < a + period)].mean() for a in t[up[:4]]]
+    assert np.ptp(windows) < 0.2 * solver.tolerance * rod.length  # means agree: premise
+    assert np.std(tip) > 10 * solver.tolerance * rod.length  # yet it swings
+    held = swing(Stage(3.0, until_equilibrium=True), settle_window=period)
+    assert held.status == "not_converged"
+    assert not held.diagnostics["stages"][0]["settled"]
 
 
 def test_local_rest_twist_over_a_segment():

@@ -138,6 +138,9 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     floats[k.F_EQUILIBRIUM_AFTER] = equilibrium_after
     floats[k.F_QUADRATIC_DRAG] = solver.quadratic_drag
     floats[k.F_DRAG_RADIUS] = rod.radius
+    floats[k.F_SETTLE_WINDOW] = solver.settle_window
+    scale = solver.settle_scale if solver.settle_scale is not None else rod.length
+    floats[k.F_SETTLE_DISTANCE] = solver.tolerance * scale
     return ints, floats
 
 
@@ -232,7 +235,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
 
     A stage with `until_equilibrium` ends early once the largest free nodal force (and
     torque per element length) is below solver.tolerance × force scale and the kinetic
-    energy below tolerance² × force scale × L0; if it never gets there the run's status is
+    energy below tolerance² × force scale × L0, or (with solver.settle_window > 0) once the
+    shape averaged over a window has moved by less than tolerance × L0 since the previous
+    window (the stage report says `settled`); if it never gets there the run's status is
     `not_converged`. A guard (non-finite state, runaway velocity, penetration) stops the
     run with status `unstable` and a message saying when, where, and what to change.
     """
@@ -315,7 +320,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         label = stage.label or f"stage {index}"
         stage_report.append({"label": label, "steps": int(steps), "end_time": float(t_end),
                              "equilibrium": code == k.S_EQUILIBRIUM,
-                             "residual": float(info[k.D_RESIDUAL])})
+                             "settled": bool(code == k.S_EQUILIBRIUM and info[k.D_SETTLED]),
+                             "residual": float(info[k.D_RESIDUAL]),
+                             "settle_motion": float(info[k.D_SETTLE_MOTION])})
         if code in _GUARD_NAMES:
             status = "unstable"
             where = int(info[k.D_WHERE])
