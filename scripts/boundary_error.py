@@ -2,9 +2,11 @@
 
     python scripts/boundary_error.py REFERENCE.csv RANDOM.csv ADAPTIVE.csv
 
-Each CSV is a classified table (`rodphase classify X.h5 --csv X.csv`) over the same box:
-the reference a dense grid (configs/fig3_grid.yaml), the others the first k runs of a
-random sweep (configs/fig3_phase.yaml) and of an adaptive one (configs/fig3_adaptive.yaml).
+Each CSV is a classified table (`rodphase classify X.h5 --csv X.csv`) over the same box and
+axes (the sweep's axis columns, between run_id and status): the reference a dense grid
+(configs/fig3_paper_reference.yaml, 24 x 24 by continuation), the others the first k runs of
+a random sweep (configs/fig3_paper.yaml) and of an adaptive one
+(configs/fig3_paper_adaptive.yaml).
 The error of k samples is the fraction of reference points whose phase the nearest of the
 k samples (in coordinates scaled to the box) gets wrong: the area misplaced by the
 boundary the k samples imply. Prints a Markdown table.
@@ -16,32 +18,41 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
-AXES = ("twist_density", "extension")
+
+def axes_of(table: pd.DataFrame) -> list[str]:
+    columns = list(table.columns)
+    return columns[columns.index("run_id") + 1:columns.index("status")]
 
 
-def scaled(table: pd.DataFrame, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
-    return (table[list(AXES)].to_numpy(float) - lo) / span
+def scaled(table: pd.DataFrame, axes, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
+    return (table[axes].to_numpy(float) - lo) / span
 
 
-def error(reference: pd.DataFrame, samples: pd.DataFrame, lo, span) -> float:
+def error(reference: pd.DataFrame, samples: pd.DataFrame, axes, lo, span) -> float:
     usable = samples[samples["phase"] != "failed"]
-    tree = cKDTree(scaled(usable, lo, span))
-    _, nearest = tree.query(scaled(reference, lo, span))
+    tree = cKDTree(scaled(usable, axes, lo, span))
+    _, nearest = tree.query(scaled(reference, axes, lo, span))
     guessed = usable["phase"].to_numpy()[nearest]
     return float(np.mean(guessed != reference["phase"].to_numpy()))
 
 
 def main(reference_csv, random_csv, adaptive_csv) -> None:
     reference = pd.read_csv(reference_csv)
-    lo = reference[list(AXES)].min().to_numpy(float)
-    span = reference[list(AXES)].max().to_numpy(float) - lo
+    axes = axes_of(reference)
+    reference = reference[reference["phase"] != "failed"]
+    lo = reference[axes].min().to_numpy(float)
+    span = reference[axes].max().to_numpy(float) - lo
     random = pd.read_csv(random_csv).sort_values("run_id")
     adaptive = pd.read_csv(adaptive_csv).sort_values("run_id")
+    for table in (random, adaptive):
+        if axes_of(table) != axes:
+            sys.exit(f"axes differ: {axes_of(table)} against the reference's {axes}")
+    print(f"reference: {len(reference)} points; phases {reference['phase'].value_counts().to_dict()}")
     print("| runs | random: boundary error | adaptive: boundary error |")
     print("|---|---|---|")
     for k in range(10, len(adaptive) + 1, 10):
-        print(f"| {k} | {error(reference, random.head(k), lo, span):.3f} | "
-              f"{error(reference, adaptive.head(k), lo, span):.3f} |")
+        print(f"| {k} | {error(reference, random.head(k), axes, lo, span):.3f} | "
+              f"{error(reference, adaptive.head(k), axes, lo, span):.3f} |")
 
 
 if __name__ == "__main__":
