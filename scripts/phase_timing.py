@@ -5,10 +5,12 @@ needs" switch.
 
     python scripts/phase_timing.py savings            # per-scene savings (one process)
     python scripts/phase_timing.py reference [--samples 40]   # fine sweep, --jobs 2
-    python scripts/phase_timing.py timing             # configs/fig3_phase.yaml, --jobs 2
+    python scripts/phase_timing.py timing             # configs/fig3_paper.yaml, --jobs 2
     python scripts/phase_timing.py compare [--write docs/performance.md]
 
-`timing` runs `rodphase sweep configs/fig3_phase.yaml -o out/perf/fig3.h5 --jobs 2` as a user
+`--config configs/fig3_phase.yaml` times the DESIGN's rest-Φa box instead of the paper's
+axes (give it to reference, timing and compare alike).
+`timing` runs `rodphase sweep configs/fig3_paper.yaml -o out/perf/fig3.h5 --jobs 2` as a user
 would (a fresh store each time unless --resume), stops it after --limit minutes (rerunning
 the same command with --resume finishes it: the store resumes), then `rodphase classify`.
 `reference` runs the same sweep with rod.elements = 140 and solver.safety = 0.25 (and
@@ -40,7 +42,7 @@ from _common import machine, write_block
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "perf"
 RODPHASE = str(Path(sys.executable).with_name("rodphase"))
-CONFIG = ROOT / "configs" / "fig3_phase.yaml"
+CONFIG = ROOT / "configs" / "fig3_paper.yaml"  # --config replaces it
 REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25"]
 
 
@@ -240,8 +242,8 @@ def compare(write: Path | None) -> str:
     fast = pd.read_csv(ROOT / state["timing"]["csv"])
     ref = pd.read_csv(ROOT / state["reference"]["csv"])
     common = fast.merge(ref, on="run_id", suffixes=("", "_ref"))
-    same_point = np.allclose(common["twist_density"], common["twist_density_ref"]) and \
-        np.allclose(common["extension"], common["extension_ref"])
+    axes = twist_axis(fast), "extension"
+    same_point = all(np.allclose(common[a], common[f"{a}_ref"]) for a in axes)
     if not same_point:
         raise SystemExit("the reference points are not the timing sweep's points")
     agree = (common["phase"] == common["phase_ref"])
@@ -288,6 +290,10 @@ def compare(write: Path | None) -> str:
     return text
 
 
+def twist_axis(table) -> str:
+    return "twist_density_current" if "twist_density_current" in table.columns else "twist_density"
+
+
 def markdown(frame) -> str:
     cols = [str(c) for c in frame.columns]
     rows = [f"| {frame.index.name} \\ {frame.columns.name} | " + " | ".join(cols) + " |",
@@ -308,17 +314,17 @@ def plot_maps(fast, ref, state) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), sharex=True, sharey=True)
     for ax, table, name in ((axes[0], fast, "timing"), (axes[1], ref, "reference")):
         for phase, grp in table.groupby("phase"):
-            ax.scatter(grp["twist_density"], grp["extension"], s=18, c=colours.get(phase, "k"),
+            ax.scatter(grp[twist_axis(table)], grp["extension"], s=18, c=colours.get(phase, "k"),
                        marker="x" if phase == "failed" else "o", label=f"{phase} ({len(grp)})")
         crept = table[table["status"] == "not_converged"]
-        ax.scatter(crept["twist_density"], crept["extension"], s=55, facecolors="none",
+        ax.scatter(crept[twist_axis(table)], crept["extension"], s=55, facecolors="none",
                    edgecolors="k", lw=0.7, label=f"hold not converged ({len(crept)})")
         s = state[name]
-        what = ("configs/fig3_phase.yaml: n = 80, safety 0.5" if name == "timing" else
+        what = (f"{CONFIG.relative_to(ROOT)}: n = 80, safety 0.5" if name == "timing" else
                 "same, n = 140, safety 0.25, first 40 points")
         ax.set_title(f"{name}: {what}\n{len(table)} runs, {s['wall'] / 60:.1f} min wall "
                      f"on 2 cores (--jobs 2)", fontsize=8)
-        ax.set_xlabel("Φa")
+        ax.set_xlabel("Φa (stretched rod)" if twist_axis(table).endswith("current") else "Φa (rest)")
         ax.legend(fontsize=7)
     axes[0].set_ylabel("L/L0")
     fig.tight_layout()
@@ -334,7 +340,12 @@ def main():
     parser.add_argument("--limit", type=float, default=25.0, help="minutes before a sweep is stopped")
     parser.add_argument("--resume", action="store_true", help="keep an existing store (resume)")
     parser.add_argument("--write", type=Path, default=None)
+    parser.add_argument("--config", type=Path, default=None,
+                        help="the sweep to time (default configs/fig3_paper.yaml)")
     args = parser.parse_args()
+    if args.config is not None:
+        global CONFIG
+        CONFIG = args.config.resolve()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     if args.step == "savings":
         if not args.resume:  # --resume: retabulate the stored measurements
