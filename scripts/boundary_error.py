@@ -50,9 +50,11 @@ def main(reference_csv, random_csv, adaptive_csv) -> None:
     print(f"reference: {len(reference)} points; phases {reference['phase'].value_counts().to_dict()}")
     print("| runs | random: boundary error | adaptive: boundary error |")
     print("|---|---|---|")
-    for k in range(10, len(adaptive) + 1, 10):
-        print(f"| {k} | {error(reference, random.head(k), axes, lo, span):.3f} | "
-              f"{error(reference, adaptive.head(k), axes, lo, span):.3f} |")
+    def cell(table, k):
+        return f"{error(reference, table.head(k), axes, lo, span):.3f}" if k <= len(table) else ""
+
+    for k in range(10, max(len(random), len(adaptive)) + 1, 10):
+        print(f"| {k} | {cell(random, k)} | {cell(adaptive, k)} |")
 
 
 if __name__ == "__main__":
