@@ -159,7 +159,7 @@ class Solver:
     check_interval: int = 50  # steps between guard and equilibrium checks
     tolerance: float = 1e-4  # equilibrium: residual force / force scale
     # s; > 0 also ends a hold once the shape, averaged over consecutive windows this long,
-    # has moved by less than tolerance × settle_scale (no surface point, m) between them
+    # has moved by less than tolerance × settle_scale [m] at every surface point between them
     settle_window: float = 0.0
     settle_scale: float | None = None  # m; None = the rod's rest length (as the kinetic test)
     speed_limit: float | None = None  # m/s; None = the axial wave speed
