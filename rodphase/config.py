@@ -184,6 +184,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "damping_ratio": (number(0, 10), 0.5),
         "exclusion": (number(0, strict_min=True, unit="rest radii of arc length"), math.pi),
         "skin": (number(0, strict_min=True, unit="rest radii"), 0.5),
+        "near_skin": (number(0, strict_min=True, unit="rest radii"), 0.01),
         "penetration_limit": (number(0, 2, strict_min=True, unit="overlap / radius"), 0.5),
     },
     "solver": {

@@ -31,7 +31,8 @@ def contact_from(cfg) -> Contact:
     c = cfg.contact
     return Contact(enabled=cfg.physics.self_contact, stiffness=c.stiffness,
                    damping_ratio=c.damping_ratio, friction=cfg.physics.friction,
-                   exclusion=c.exclusion, skin=c.skin, penetration_limit=c.penetration_limit)
+                   exclusion=c.exclusion, skin=c.skin, near_skin=c.near_skin,
+                   penetration_limit=c.penetration_limit)
 
 
 def solver_from(cfg) -> Solver:

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from rodphase import config as C
 from rodphase.rod import (
     Contact,
     Controls,
@@ -28,8 +29,9 @@ from rodphase.rod import (
     time_step,
 )
 from rodphase.rod import kernel as K
-from rodphase.rod.contact import add_contact_forces, brute_force_pairs, build_pairs
+from rodphase.rod.contact import add_contact_forces, brute_force_pairs, build_pairs, near_pairs
 from rodphase.rod.simulate import _rod_arrays
+from rodphase.scenes import SCENES, build
 
 FREE = Ends(start_held=(False,) * 3, start_frame_held=False)
 
@@ -264,6 +266,57 @@ def test_grid_finds_exactly_the_pairs_of_the_all_pairs_search():
         pairs, count = build_pairs(x, 3, 0.05, np.empty((2, 4), dtype=np.int64))
         found = {(int(i), int(j)) for i, j in pairs[:, :count].T}
         assert found == brute_force_pairs(x, 3, 0.05)
+
+
+def test_near_list_holds_exactly_the_candidates_within_the_margin():
+    # Random walk with element length 0.01 and radius 0.01: many candidate pairs, a few near.
+    # The near list must be the candidates whose capsule gap is below the margin, computed
+    # here independently by sampling both segments finely (gap error < 1e-4 of the margin
+    # scale), and it must keep the candidate list's order.
+    rng = np.random.default_rng(5)
+    n = 200
+    steps = rng.standard_normal((n, 3))
+    steps /= np.linalg.norm(steps, axis=1)[:, None]
+    x = np.vstack([np.zeros(3), np.cumsum(0.01 * steps, axis=0)]).T.copy()
+    radius = 0.01 * (0.8 + 0.4 * rng.random(n))
+    pairs, count = build_pairs(x, 3, 0.06, np.empty((2, 8), dtype=np.int64))
+    margin = 0.004
+    near = np.empty_like(pairs)
+    n_near = near_pairs(x, radius, pairs, count, margin, near)
+    u = np.linspace(0.0, 1.0, 401)
+    expected = []
+    for i, j in pairs[:, :count].T:
+        a = x[:, i][:, None] + u * (x[:, i + 1] - x[:, i])[:, None]
+        b = x[:, j][:, None] + u * (x[:, j + 1] - x[:, j])[:, None]
+        gap = np.sqrt(((a[:, :, None] - b[:, None, :]) ** 2).sum(axis=0)).min() - radius[i] - radius[j]
+        if abs(gap - margin) > 1e-6:  # sampling error ~ (0.01/400)²/gap; skip the borderline
+            expected.append(((int(i), int(j)), gap < margin))
+    listed = [(int(i), int(j)) for i, j in near[:, :n_near].T]
+    assert listed == [pq for pq in map(tuple, pairs[:, :count].T.tolist()) if pq in set(listed)]
+    assert 0 < n_near < count
+    for pair, is_near in expected:
+        assert (pair in listed) == is_near, pair
+
+
+def test_the_near_list_changes_no_force_while_a_plectoneme_forms():
+    # The force loop runs over the near list (gap < near_skin), rebuilt when gaps could have
+    # closed by near_skin. If a pair that comes into contact were missed, the run would differ
+    # from one whose near list is the whole candidate list (near_skin far larger than the
+    # rod). Same pairs in the same order give the same sums: equal to round-off (1e-12 m).
+    cfg = C.load_scene("twist_under_load", [("rod.elements", 40), ("loading.twist_density", 0.75),
+                                            ("loading.twist_rate", 2.0), ("solver.hold_until", "time"),
+                                            ("solver.hold_max_time", 1.5)], SCENES)
+    problem = build(cfg)
+    runs = {}
+    for near_skin in (0.01, 1e3):
+        contact = dataclasses.replace(problem.contact, near_skin=near_skin)
+        runs[near_skin] = simulate(dataclasses.replace(problem, contact=contact))
+    tight, everything = runs[0.01], runs[1e3]
+    assert tight.ok and everything.ok
+    assert tight.history["contacts"][-1] >= 5  # the plectoneme touches itself (9 pairs)
+    assert np.abs(tight.positions - everything.positions).max() < 1e-12
+    # the tight list really was rebuilt as the rod moved, the loose one only with the grid
+    assert tight.diagnostics["near_rebuilds"] > 5 * everything.diagnostics["near_rebuilds"]
 
 
 def test_contact_force_is_a_balanced_normal_spring():

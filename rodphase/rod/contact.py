@@ -118,6 +118,59 @@ def closest_parameters(p0, p1, p2, q0, q1, q2, u0, u1, u2, w0, w1, w2):
 
 
 @njit(cache=True, fastmath=_FASTMATH)
+def near_pairs(x, radius, pairs, n_pairs, margin, near):
+    """The listed pairs whose capsules are less than `margin` apart (gap = distance − r_i − r_j).
+
+    The second level of the Verlet list: the candidate list (`build_pairs`) is ~10× longer
+    than the pairs in contact (its cutoff must cover midpoints, half-lengths and a skin), so
+    the force loop runs over this short list instead, rebuilt from the long one whenever the
+    gaps could have closed by `margin`: a segment-to-segment distance changes by at most the
+    sum of the two segments' largest node displacements. near: (2, ≥ n_pairs) int64 buffer.
+    Returns the number of near pairs, written to near[:, :count] in list order.
+    """
+    n = radius.shape[0]
+    # Each capsule lies within its reach (radius + half length) of its midpoint: one cheap
+    # distance test rejects most listed pairs before the closest-point computation.
+    mid = np.empty((3, n))
+    reach = np.empty(n)
+    for i in range(n):
+        u0 = x[0, i + 1] - x[0, i]
+        u1 = x[1, i + 1] - x[1, i]
+        u2 = x[2, i + 1] - x[2, i]
+        mid[0, i] = x[0, i] + 0.5 * u0
+        mid[1, i] = x[1, i] + 0.5 * u1
+        mid[2, i] = x[2, i] + 0.5 * u2
+        reach[i] = radius[i] + 0.5 * np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    count = 0
+    for p in range(n_pairs):
+        i = pairs[0, p]
+        j = pairs[1, p]
+        m0 = mid[0, i] - mid[0, j]
+        m1 = mid[1, i] - mid[1, j]
+        m2 = mid[2, i] - mid[2, j]
+        r = reach[i] + reach[j] + margin
+        if m0 * m0 + m1 * m1 + m2 * m2 >= r * r:
+            continue
+        u0 = x[0, i + 1] - x[0, i]
+        u1 = x[1, i + 1] - x[1, i]
+        u2 = x[2, i + 1] - x[2, i]
+        w0 = x[0, j + 1] - x[0, j]
+        w1 = x[1, j + 1] - x[1, j]
+        w2 = x[2, j + 1] - x[2, j]
+        s, t = closest_parameters(x[0, i], x[1, i], x[2, i], x[0, j], x[1, j], x[2, j],
+                                  u0, u1, u2, w0, w1, w2)
+        d0 = x[0, i] + s * u0 - x[0, j] - t * w0
+        d1 = x[1, i] + s * u1 - x[1, j] - t * w1
+        d2 = x[2, i] + s * u2 - x[2, j] - t * w2
+        gap = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - radius[i] - radius[j]
+        if gap < margin:
+            near[0, count] = i
+            near[1, count] = j
+            count += 1
+    return count
+
+
+@njit(cache=True, fastmath=_FASTMATH)
 def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction,
                        slip_speed, thinning, force):
     """Add penalty contact forces of the listed pairs to `force` (3, n+1).
@@ -138,54 +191,73 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     Returns (number of touching pairs, largest overlap / smaller radius, its element index,
     the spring energy Σ ½·k·δ²).
     """
-    damping_scale = np.sqrt(scale)
-    energy = 0.0
-    touching = 0
-    worst = 0.0
-    worst_element = -1
     n = radius.shape[0]
-    # Each capsule lies within its reach (radius + half length) of its midpoint: one cheap
-    # distance test rejects most listed pairs before the closest-point computation.
-    mid = np.empty((3, n))
-    reach = np.empty(n)
+    damping_scale = np.sqrt(scale)
+    # Per element, once (a vectorised O(n) pass): the segment vector, 1/|u|² and the
+    # thinning lever a/(2|u|²). The pair loop then divides only for the line of closest
+    # approach and its unit normal, and takes a square root only for pairs that touch.
+    seg = np.empty((3, n))
+    inv_square = np.empty(n)
+    lever = np.empty(n)
     for i in range(n):
         u0 = x[0, i + 1] - x[0, i]
         u1 = x[1, i + 1] - x[1, i]
         u2 = x[2, i + 1] - x[2, i]
-        mid[0, i] = x[0, i] + 0.5 * u0
-        mid[1, i] = x[1, i] + 0.5 * u1
-        mid[2, i] = x[2, i] + 0.5 * u2
-        reach[i] = radius[i] + 0.5 * np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+        seg[0, i] = u0
+        seg[1, i] = u1
+        seg[2, i] = u2
+        inv_square[i] = 1.0 / (u0 * u0 + u1 * u1 + u2 * u2)
+        lever[i] = 0.5 * thinning * radius[i] * inv_square[i]
+    energy = 0.0
+    touching = 0
+    worst = 0.0
+    worst_element = -1
     for p in range(n_pairs):
         i = pairs[0, p]
         j = pairs[1, p]
-        m0 = mid[0, i] - mid[0, j]
-        m1 = mid[1, i] - mid[1, j]
-        m2 = mid[2, i] - mid[2, j]
-        r = reach[i] + reach[j]
-        if m0 * m0 + m1 * m1 + m2 * m2 >= r * r:
+        u0 = seg[0, i]
+        u1 = seg[1, i]
+        u2 = seg[2, i]
+        w0 = seg[0, j]
+        w1 = seg[1, j]
+        w2 = seg[2, j]
+        r0 = x[0, i] - x[0, j]
+        r1 = x[1, i] - x[1, j]
+        r2 = x[2, i] - x[2, j]
+        # closest points x_i + s·u and x_j + t·w (as closest_parameters, with the
+        # reciprocals of |u|² and |w|² from the element pass)
+        a = u0 * u0 + u1 * u1 + u2 * u2
+        e = w0 * w0 + w1 * w1 + w2 * w2
+        b = u0 * w0 + u1 * w1 + u2 * w2
+        c = u0 * r0 + u1 * r1 + u2 * r2
+        f = w0 * r0 + w1 * r1 + w2 * r2
+        denom = a * e - b * b
+        if denom > 1e-12 * a * e:
+            s = min(max((b * f - c * e) / denom, 0.0), 1.0)
+        else:
+            s = 0.0  # parallel segments: any point of the overlap is a closest point
+        t = (b * s + f) * inv_square[j]
+        if t < 0.0:
+            t = 0.0
+            s = min(max(-c * inv_square[i], 0.0), 1.0)
+        elif t > 1.0:
+            t = 1.0
+            s = min(max((b - c) * inv_square[i], 0.0), 1.0)
+        d0 = r0 + s * u0 - t * w0
+        d1 = r1 + s * u1 - t * w1
+        d2 = r2 + s * u2 - t * w2
+        reach = radius[i] + radius[j]
+        dist2 = d0 * d0 + d1 * d1 + d2 * d2
+        if dist2 >= reach * reach or dist2 <= 0.0:
             continue
-        u0 = x[0, i + 1] - x[0, i]
-        u1 = x[1, i + 1] - x[1, i]
-        u2 = x[2, i + 1] - x[2, i]
-        w0 = x[0, j + 1] - x[0, j]
-        w1 = x[1, j + 1] - x[1, j]
-        w2 = x[2, j + 1] - x[2, j]
-        s, t = closest_parameters(x[0, i], x[1, i], x[2, i], x[0, j], x[1, j], x[2, j],
-                                  u0, u1, u2, w0, w1, w2)
-        d0 = x[0, i] + s * u0 - x[0, j] - t * w0
-        d1 = x[1, i] + s * u1 - x[1, j] - t * w1
-        d2 = x[2, i] + s * u2 - x[2, j] - t * w2
-        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        overlap = radius[i] + radius[j] - dist
-        if overlap <= 0.0 or dist <= 0.0:
-            continue
+        dist = np.sqrt(dist2)
+        overlap = reach - dist
         touching += 1
-        energy += 0.5 * scale * stiffness[i] * overlap * overlap
-        smaller = radius[i] if radius[i] < radius[j] else radius[j]
-        depth = overlap / smaller
-        if depth > worst:
-            worst = depth
+        spring = scale * stiffness[i] * overlap
+        energy += 0.5 * spring * overlap
+        smaller = min(radius[i], radius[j])
+        if overlap > worst * smaller:  # overlap / smaller > worst, without dividing
+            worst = overlap / smaller
             worst_element = i
         inv = 1.0 / dist
         n0 = d0 * inv
@@ -195,28 +267,12 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         rv1 = (1.0 - s) * v[1, i] + s * v[1, i + 1] - (1.0 - t) * v[1, j] - t * v[1, j + 1]
         rv2 = (1.0 - s) * v[2, i] + s * v[2, i + 1] - (1.0 - t) * v[2, j] - t * v[2, j + 1]
         vn = rv0 * n0 + rv1 * n1 + rv2 * n2
-        fn = scale * stiffness[i] * overlap - damping_scale * damping[i] * vn
+        fn = spring - damping_scale * damping[i] * vn
         if fn <= 0.0:
             continue  # a dashpot may push apart, never pull together
         f0 = fn * n0
         f1 = fn * n1
         f2 = fn * n2
-        if thinning != 0.0:
-            spring = thinning * scale * stiffness[i] * overlap
-            gi = spring * radius[i] / (2.0 * (u0 * u0 + u1 * u1 + u2 * u2))
-            gj = spring * radius[j] / (2.0 * (w0 * w0 + w1 * w1 + w2 * w2))
-            force[0, i] -= gi * u0
-            force[1, i] -= gi * u1
-            force[2, i] -= gi * u2
-            force[0, i + 1] += gi * u0
-            force[1, i + 1] += gi * u1
-            force[2, i + 1] += gi * u2
-            force[0, j] -= gj * w0
-            force[1, j] -= gj * w1
-            force[2, j] -= gj * w2
-            force[0, j + 1] += gj * w0
-            force[1, j + 1] += gj * w1
-            force[2, j + 1] += gj * w2
         if friction > 0.0:
             t0 = rv0 - vn * n0
             t1 = rv1 - vn * n1
@@ -227,18 +283,21 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
             f0 -= slide * t0
             f1 -= slide * t1
             f2 -= slide * t2
-        force[0, i] += (1.0 - s) * f0
-        force[1, i] += (1.0 - s) * f1
-        force[2, i] += (1.0 - s) * f2
-        force[0, i + 1] += s * f0
-        force[1, i + 1] += s * f1
-        force[2, i + 1] += s * f2
-        force[0, j] -= (1.0 - t) * f0
-        force[1, j] -= (1.0 - t) * f1
-        force[2, j] -= (1.0 - t) * f2
-        force[0, j + 1] -= t * f0
-        force[1, j + 1] -= t * f1
-        force[2, j + 1] -= t * f2
+        # the overlap's dependence on the element lengths (radii a0/√e); lever is 0 without thinning
+        gi = spring * lever[i]
+        gj = spring * lever[j]
+        force[0, i] += (1.0 - s) * f0 - gi * u0
+        force[1, i] += (1.0 - s) * f1 - gi * u1
+        force[2, i] += (1.0 - s) * f2 - gi * u2
+        force[0, i + 1] += s * f0 + gi * u0
+        force[1, i + 1] += s * f1 + gi * u1
+        force[2, i + 1] += s * f2 + gi * u2
+        force[0, j] -= (1.0 - t) * f0 + gj * w0
+        force[1, j] -= (1.0 - t) * f1 + gj * w1
+        force[2, j] -= (1.0 - t) * f2 + gj * w2
+        force[0, j + 1] -= t * f0 - gj * w0
+        force[1, j + 1] -= t * f1 - gj * w1
+        force[2, j + 1] -= t * f2 - gj * w2
     return touching, worst, worst_element, energy
 
 

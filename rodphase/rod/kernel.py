@@ -25,7 +25,7 @@ import numpy as np
 
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
-from .contact import add_contact_forces, build_pairs
+from .contact import add_contact_forces, build_pairs, near_pairs
 
 # integer settings
 I_INCOMPRESSIBLE = 0
@@ -62,7 +62,8 @@ F_QUADRATIC_DRAG = 21  # 1/m: extra drag rate per unit speed (speed × this, in 
 F_DRAG_RADIUS = 22  # m: lever that turns spin into a surface speed for the quadratic drag
 F_SETTLE_WINDOW = 23  # s: window over which the mean shape is compared (0: residual test only)
 F_SETTLE_DISTANCE = 24  # m: the mean shape settled if no surface point moved more than this
-N_FLOATS = 25
+F_NEAR_SKIN = 25  # m: gap below which a candidate pair enters the short (near) contact list
+N_FLOATS = 26
 
 # control tables
 T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
@@ -111,7 +112,8 @@ D_RESIDUAL = 5
 D_KINETIC = 6
 D_SETTLED = 7  # 1 if the last equilibrium stop was by the settled mean shape, not the residual
 D_SETTLE_MOTION = 8  # m: last settle measure: motion of the window-mean shape or spread
-N_INFO = 9
+D_NEAR_REBUILDS = 9  # rebuilds of the near contact list
+N_INFO = 10
 
 
 @njit(cache=True, inline="always")
@@ -479,6 +481,7 @@ def advance(x, v, Q, w, t_start, n_steps,
     friction = floats[F_FRICTION]
     slip_speed = floats[F_SLIP_SPEED]
     skin = floats[F_SKIN]
+    near_skin = floats[F_NEAR_SKIN]
     penetration_limit = floats[F_PENETRATION_LIMIT]
     speed_limit = floats[F_SPEED_LIMIT]
     tolerance = floats[F_TOLERANCE]
@@ -518,6 +521,14 @@ def advance(x, v, Q, w, t_start, n_steps,
     x_build = x.copy()
     pairs = np.empty((2, 16 * n + 64), dtype=np.int64)
     n_pairs = 0
+    # Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
+    # a node has moved skin/4 since x_build; `near` (the pairs of it within near_skin of
+    # touching) when gaps could have closed by near_skin since x_near / radius_near.
+    x_near = x.copy()
+    radius_near = rest_radius.copy()
+    near = np.empty((2, pairs.shape[1]), dtype=np.int64)
+    n_near = 0
+    near_rebuilds = 0
     radius_cut = 0.0
     need_build = True
     rebuilds = 0
@@ -604,36 +615,46 @@ def advance(x, v, Q, w, t_start, n_steps,
 
         if contact_on:
             _radii(rest_radius, dilatation, f_radius, incompressible, radius)
-            if not need_build:
-                moved = 0.0
-                for i in range(n + 1):
-                    d0 = x[0, i] - x_build[0, i]
-                    d1 = x[1, i] - x_build[1, i]
-                    d2 = x[2, i] - x_build[2, i]
-                    moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
-                # A pair outside the list needs its gap to shrink by > skin: midpoints and
-                # half-lengths each move by at most the largest node displacement, so 4·moved.
-                if 16.0 * moved > skin * skin:
-                    need_build = True
-                else:
-                    for i in range(n):
-                        if radius[i] > radius_cut:
-                            need_build = True
-                            break
-            if need_build:
+            moved = 0.0
+            moved_near = 0.0
+            for i in range(n + 1):
+                d0 = x[0, i] - x_build[0, i]
+                d1 = x[1, i] - x_build[1, i]
+                d2 = x[2, i] - x_build[2, i]
+                moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
+                d0 = x[0, i] - x_near[0, i]
+                d1 = x[1, i] - x_near[1, i]
+                d2 = x[2, i] - x_near[2, i]
+                moved_near = max(moved_near, d0 * d0 + d1 * d1 + d2 * d2)
+            grown = 0.0
+            widest = 0.0
+            for i in range(n):
+                grown = max(grown, radius[i] - radius_near[i])
+                widest = max(widest, radius[i])
+            # A pair outside the long list needs its gap to shrink by > skin: midpoints and
+            # half-lengths each move by at most the largest node displacement, so 4·moved.
+            if need_build or 16.0 * moved > skin * skin or widest > radius_cut:
                 longest = 0.0
-                biggest = 0.0
                 for i in range(n):
                     longest = max(longest, lengths[i])
-                    biggest = max(biggest, radius[i])
-                radius_cut = 1.1 * biggest
+                radius_cut = 1.1 * widest
                 pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
+                if near.shape[1] < pairs.shape[1]:
+                    near = np.empty((2, pairs.shape[1]), dtype=np.int64)
                 x_build[:, :] = x
                 need_build = False
                 rebuilds += 1
                 max_pairs = max(max_pairs, n_pairs)
+                moved_near = np.inf
+            # A gap changes by at most the two segments' largest node displacements plus the
+            # growth of the two radii.
+            if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
+                n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
+                x_near[:, :] = x
+                radius_near[:] = radius
+                near_rebuilds += 1
             touching, worst, worst_at, contact_energy = add_contact_forces(
-                x, v, radius, pairs, n_pairs, contact_k, contact_c, f_stiff, friction, slip_speed,
+                x, v, radius, near, n_near, contact_k, contact_c, f_stiff, friction, slip_speed,
                 1.0 if incompressible else 0.0, force)
             if worst > max_penetration:
                 max_penetration = worst
@@ -850,4 +871,5 @@ def advance(x, v, Q, w, t_start, n_steps,
     info[D_RESIDUAL] = residual
     info[D_KINETIC] = kinetic
     info[D_SETTLE_MOTION] = settle_motion
+    info[D_NEAR_REBUILDS] = near_rebuilds
     return status, steps, t, rows

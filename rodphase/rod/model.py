@@ -136,6 +136,7 @@ class Contact:
     slip_speed: float = 1e-4  # m/s, below it friction is viscous (regularised Coulomb)
     exclusion: float = math.pi  # rest radii of arc length
     skin: float = 0.5  # rest radii; the Verlet-list margin
+    near_skin: float = 0.01  # rest radii; the margin of the short list the force loop runs over
     penetration_limit: float = 0.5  # overlap / radius beyond which the run is unstable
 
 

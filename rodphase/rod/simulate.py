@@ -124,6 +124,7 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     floats[k.F_FRICTION] = contact.friction
     floats[k.F_SLIP_SPEED] = contact.slip_speed
     floats[k.F_SKIN] = contact.skin * rod.radius
+    floats[k.F_NEAR_SKIN] = contact.near_skin * rod.radius
     floats[k.F_PENETRATION_LIMIT] = contact.penetration_limit
     c_axial = math.sqrt(rod.youngs_modulus / rod.density)
     floats[k.F_SPEED_LIMIT] = solver.speed_limit if solver.speed_limit is not None else c_axial
@@ -267,6 +268,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     status, message = "ok", "completed"
     steps_total = 0
     rebuilds = 0
+    near_rebuilds = 0
     max_pairs = 0
     max_pen = 0.0
     stage_report = []
@@ -307,6 +309,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         state.time = t_end
         steps_total += steps
         rebuilds += int(info[k.D_REBUILDS])
+        near_rebuilds += int(info[k.D_NEAR_REBUILDS])
         max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
         max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
         axis = floats[k.F_AXIS:k.F_AXIS + 3]
@@ -370,7 +373,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     diagnostics = {
         "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
         "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
-        "max_pairs": max_pairs, "max_penetration": max_pen, "final_time": state.time,
+        "near_rebuilds": near_rebuilds,        "max_pairs": max_pairs, "max_penetration": max_pen, "final_time": state.time,
         "rest_radius": rod.radius, "rest_length": rod.length, "elements": n,
         "youngs_modulus": rod.youngs_modulus,
         "force_scale": force_scale(problem), "stages": stage_report, "notes": notes,
