@@ -79,6 +79,7 @@ def _save(name: str, data: dict) -> None:
 
 
 def run_sweep(name: str, store: Path, sets: list[str], limit_min: float, resume: bool) -> dict:
+    OUT.mkdir(parents=True, exist_ok=True)
     if store.exists() and not resume:
         store.unlink()
     cmd = [RODPHASE, "sweep", str(CONFIG), "-o", str(store), "--jobs", "2", "--quiet"]
@@ -234,7 +235,7 @@ def savings_table(data: dict) -> str:
 
 # ---------------------------------------------------------------- compare
 
-def compare(write: Path | None) -> str:
+def compare(write: list[Path]) -> str:
     import numpy as np
     import pandas as pd
 
@@ -281,12 +282,12 @@ def compare(write: Path | None) -> str:
     print(text)
     plot_maps(fast, ref, state)
     if write:
-
         m = machine()
         busy = state["timing"].get("others_before") or []
         note = (f"{m['cpu']}, {m['nproc']} cores. Busy processes not ours at the start of the "
                 f"timing: {len(busy)}" + (f" ({'; '.join(busy)})" if busy else "") + ".")
-        write_block(write, "phase_timing", text + "\n" + note)
+        for doc in write:
+            write_block(doc, "phase_timing", text + "\n" + note)
     return text
 
 
@@ -339,7 +340,8 @@ def main():
     parser.add_argument("--samples", type=int, default=40, help="reference: points (first of the 200)")
     parser.add_argument("--limit", type=float, default=25.0, help="minutes before a sweep is stopped")
     parser.add_argument("--resume", action="store_true", help="keep an existing store (resume)")
-    parser.add_argument("--write", type=Path, default=None)
+    parser.add_argument("--write", type=Path, action="append", default=[],
+                        help="Markdown file to update (repeatable)")
     parser.add_argument("--config", type=Path, default=None,
                         help="the sweep to time (default configs/fig3_paper.yaml)")
     args = parser.parse_args()
@@ -352,9 +354,8 @@ def main():
             _save("savings", savings())
         text = savings_table(json.loads(_state_path("savings").read_text()))
         print(text)
-        if args.write:
-    
-            write_block(args.write, "savings", text)
+        for doc in args.write:
+            write_block(doc, "savings", text)
     elif args.step == "reference":
         info = run_sweep("reference", OUT / "fig3_ref.h5",
                          REFERENCE_SET + [f"sweep.samples={args.samples}"], args.limit, args.resume)
