@@ -3,7 +3,9 @@
 Each element is a capsule (segment plus current radius). Candidate pairs come from a
 hashed uniform grid of element midpoints and are kept as a Verlet list that is rebuilt
 only when some node has moved far enough (a quarter of the skin) that a pair outside
-the list could have come into contact. All arrays are structure-of-arrays: (3, n).
+the list could have come into contact. The force loop runs over a second, shorter list
+(`near_pairs`: the candidates within a small margin of touching), rebuilt from the first
+when a gap could have closed by that margin. All arrays are structure-of-arrays: (3, n).
 """
 
 import numpy as np
