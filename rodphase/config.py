@@ -199,6 +199,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         # a hold also ends once the window-mean shape moves < hold_tolerance × L0 per window
         "settle_window": (number(0, unit="s; 0 = residual test only"), 0.5),
         "max_steps": (number(1, integer=True, nullable=True), None),
+        # a run stopped as under-resolved is run again with twice the elements, up to this
+        "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
     },
     "output": {
         "history_interval": (number(0, strict_min=True, unit="s"), 0.1),

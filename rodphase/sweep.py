@@ -101,9 +101,29 @@ def run_scene(scene_plain: dict, *, topology: bool | None = None,
 
     cfg = C.validate_scene(scene_plain, SCENES)
     extra = {} if twist_targets is None else {"twist_targets": twist_targets}
-    problem = build(cfg, **extra)
     want_topology = cfg.output.topology if topology is None else topology
-    return simulate(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
+
+    def run(cfg):
+        return simulate(build(cfg, **extra), max_steps=cfg.solver.max_steps, topology=want_topology)
+
+    tried = [cfg.rod.elements]
+    result = run(cfg)
+    wall_before = 0.0
+    # A rod turned by > 135° between neighbouring frames needs more elements, not a smaller
+    # step: with solver.refine_up_to, run it again with twice as many (up to that number).
+    while (result.diagnostics.get("guard") == "resolution"
+           and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
+        wall_before += result.diagnostics["wall_time"]
+        tried.append(min(2 * tried[-1], cfg.solver.refine_up_to))
+        cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", tried[-1])]), SCENES)
+        result = run(cfg)
+    if len(tried) > 1:
+        result.diagnostics["refined_from"] = tried[:-1]
+        result.diagnostics["wall_time_before_refining"] = wall_before
+        result.diagnostics["notes"].append(
+            f"under-resolved at {', '.join(map(str, tried[:-1]))} elements; this is the run "
+            f"with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to})")
+    return result
 
 
 def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:

@@ -14,7 +14,7 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     rest_length = float(d.get("rest_length", np.nan))
     radius = float(d.get("rest_radius", np.nan))
     row = {"status": result.status, "wall_time": float(d.get("wall_time", np.nan)),
-           "steps": int(d.get("steps", 0))}
+           "steps": int(d.get("steps", 0)), "elements": int(d.get("elements", 0))}
     if result.status == "error" or not len(result.history.get("time", [])):
         return row | {"alignment": np.nan, "phase": "failed"}
     value = alignment(result.positions, radius, rest_length=rest_length, epsilon=epsilon)

@@ -17,7 +17,7 @@ from click.testing import CliRunner
 from rodphase import config as C
 from rodphase.cli import main
 from rodphase.scenes import SCENES
-from rodphase.sweep import plan, sample_points
+from rodphase.sweep import plan, run_scene, sample_points
 
 # coarse and short: 12 elements, a fast twist and brief holds; still a real run with contact
 FAST = {"rod.elements": 32, "solver.hold_max_time": 0.5, "loading.twist_rate": 2.0,
@@ -232,3 +232,24 @@ def test_run_then_every_plot_kind_and_a_movie(tmp_path):
     # a phase map needs a classified sweep; a bad run id is a clear error
     result = cli("movie", out, "--run", "nope", "-o", tmp_path / "x.gif")
     assert result.exit_code == 2 and "nope" in result.output
+
+
+def test_an_under_resolved_run_is_run_again_with_more_elements():
+    # Φa = 1.2 on 12 elements is 4 rad of twist per element: the resolution guard stops it.
+    # With solver.refine_up_to the same point is rerun at 24, then 48 elements, where it
+    # completes; the result says so. Without it the run stays a recorded failure.
+    overrides = [("rod.elements", 12), ("loading.twist_density", 1.2), ("loading.twist_rate", 4.0),
+                 ("solver.hold_until", "time"), ("solver.hold_max_time", 0.5),
+                 ("output.topology", False)]
+    coarse = run_scene(C.load_scene("twist_under_load", overrides, SCENES).plain())
+    assert coarse.status == "unstable" and coarse.diagnostics["guard"] == "resolution"
+    assert "refined_from" not in coarse.diagnostics
+    cfg = C.load_scene("twist_under_load", overrides + [("solver.refine_up_to", 48)], SCENES)
+    refined = run_scene(cfg.plain())
+    assert refined.status == "ok", refined.message
+    assert refined.diagnostics["elements"] == 48 and refined.positions.shape == (49, 3)
+    assert refined.diagnostics["refined_from"] == [12, 24]
+    assert refined.diagnostics["wall_time_before_refining"] > 0
+    assert "under-resolved at 12, 24 elements" in refined.diagnostics["notes"][-1]
+    # the same protocol: all the twist asked for (Φa·L0/a of end rotation) went in
+    assert refined.history["end_rotation"][-1] == pytest.approx(1.2 * cfg.rod.length / cfg.rod.radius)

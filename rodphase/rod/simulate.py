@@ -16,6 +16,14 @@ from ..result import HISTORY_COLUMNS, RunResult
 from . import kernel as k
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
+# short names of the guards, for diagnostics["guard"] (what a caller may act on)
+GUARD_CODES = {
+    k.S_NAN: "non_finite",
+    k.S_SPEED: "speed",
+    k.S_PENETRATION: "penetration",
+    k.S_RESOLUTION: "resolution",
+}
+
 _GUARD_NAMES = {
     k.S_NAN: "non-finite state (NaN or inf)",
     k.S_SPEED: "runaway velocity",
@@ -266,6 +274,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     rows_h, rows_x, rows_d, stage_ids, stage_ends, stage_states = [], [], [], [], [], []
     info = np.zeros(k.N_INFO)
     status, message = "ok", "completed"
+    guard = None
     steps_total = 0
     rebuilds = 0
     near_rebuilds = 0
@@ -328,6 +337,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                              "settle_motion": float(info[k.D_SETTLE_MOTION])})
         if code in _GUARD_NAMES:
             status = "unstable"
+            guard = GUARD_CODES[code]
             where = int(info[k.D_WHERE])
             unit = {k.S_PENETRATION: "element", k.S_RESOLUTION: "Voronoi domain"}.get(code, "node")
             advice = ("Use more rod.elements (twist per element = Φa·L0/(a·n) rad)."
@@ -377,6 +387,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         "rest_radius": rod.radius, "rest_length": rod.length, "elements": n,
         "youngs_modulus": rod.youngs_modulus,
         "force_scale": force_scale(problem), "stages": stage_report, "notes": notes,
+        "guard": guard,
     }
     return RunResult(status=status, message=message, positions=state.positions,
                      directors=state.directors, radii=radii, rest_lengths=rest.copy(),
