@@ -44,7 +44,7 @@ phase: $(STAMP)  ## the DESIGN's Fig 3 box, rest twist axis (configs/fig3_phase.
 	$(BIN)/rodphase classify $(OUT)/fig3.h5 --csv $(OUT)/fig3.csv
 	$(BIN)/rodphase plot $(OUT)/fig3.h5 --kind phase -o $(OUT)/fig3_phase.png
 
-fig3: $(STAMP)  ## the paper's Fig 3 in its twist axis, with the Phi_c fit (~5 min on 2 cores)
+fig3: $(STAMP)  ## the paper's Fig 3 in its twist axis, with the Phi_c fit (~2 min on 2 cores)
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_paper.yaml -o $(OUT)/fig3_paper.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3_paper.h5 --csv $(OUT)/fig3_paper.csv
