@@ -372,8 +372,9 @@ def touching_pairs(x, radius, lengths, pyelastica_skip):
         for j in range(i - skip, -1, -1):
             u0, u1, u2 = x[0, i + 1] - x[0, i], x[1, i + 1] - x[1, i], x[2, i + 1] - x[2, i]
             w0, w1, w2 = x[0, j + 1] - x[0, j], x[1, j + 1] - x[1, j], x[2, j + 1] - x[2, j]
-            s, t = closest_parameters(x[0, i], x[1, i], x[2, i], x[0, j], x[1, j], x[2, j],
-                                      u0, u1, u2, w0, w1, w2)
+            s, t = closest_parameters(x[0, i] - x[0, j], x[1, i] - x[1, j], x[2, i] - x[2, j],
+                                      u0, u1, u2, w0, w1, w2, 1.0 / (u0 * u0 + u1 * u1 + u2 * u2),
+                                      1.0 / (w0 * w0 + w1 * w1 + w2 * w2))
             d0 = x[0, i] + s * u0 - x[0, j] - t * w0
             d1 = x[1, i] + s * u1 - x[1, j] - t * w1
             d2 = x[2, i] + s * u2 - x[2, j] - t * w2

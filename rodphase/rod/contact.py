@@ -93,29 +93,29 @@ def build_pairs(x, exclusion, cutoff, pairs):
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
-def closest_parameters(p0, p1, p2, q0, q1, q2, u0, u1, u2, w0, w1, w2):
-    """Parameters (s, t) in [0, 1] of the closest points p + s·u and q + t·w of two segments."""
+def closest_parameters(r0, r1, r2, u0, u1, u2, w0, w1, w2, inv_uu, inv_ww):
+    """Parameters (s, t) in [0, 1] of the closest points p + s·u and q + t·w of two segments.
+
+    r = p − q; inv_uu = 1/|u|² and inv_ww = 1/|w|², passed in because a caller looping over
+    pairs can compute them once per element.
+    """
     a = u0 * u0 + u1 * u1 + u2 * u2
     e = w0 * w0 + w1 * w1 + w2 * w2
-    r0 = p0 - q0
-    r1 = p1 - q1
-    r2 = p2 - q2
     b = u0 * w0 + u1 * w1 + u2 * w2
     c = u0 * r0 + u1 * r1 + u2 * r2
     f = w0 * r0 + w1 * r1 + w2 * r2
     denom = a * e - b * b
     if denom > 1e-12 * a * e:
-        s = (b * f - c * e) / denom
-        s = min(max(s, 0.0), 1.0)
+        s = min(max((b * f - c * e) / denom, 0.0), 1.0)
     else:
         s = 0.0  # parallel segments: any point of the overlap is a closest point
-    t = (b * s + f) / e
+    t = (b * s + f) * inv_ww
     if t < 0.0:
         t = 0.0
-        s = min(max(-c / a, 0.0), 1.0)
+        s = min(max(-c * inv_uu, 0.0), 1.0)
     elif t > 1.0:
         t = 1.0
-        s = min(max((b - c) / a, 0.0), 1.0)
+        s = min(max((b - c) * inv_uu, 0.0), 1.0)
     return s, t
 
 
@@ -159,11 +159,15 @@ def near_pairs(x, radius, pairs, n_pairs, margin, near):
         w0 = x[0, j + 1] - x[0, j]
         w1 = x[1, j + 1] - x[1, j]
         w2 = x[2, j + 1] - x[2, j]
-        s, t = closest_parameters(x[0, i], x[1, i], x[2, i], x[0, j], x[1, j], x[2, j],
-                                  u0, u1, u2, w0, w1, w2)
-        d0 = x[0, i] + s * u0 - x[0, j] - t * w0
-        d1 = x[1, i] + s * u1 - x[1, j] - t * w1
-        d2 = x[2, i] + s * u2 - x[2, j] - t * w2
+        r0 = x[0, i] - x[0, j]
+        r1 = x[1, i] - x[1, j]
+        r2 = x[2, i] - x[2, j]
+        s, t = closest_parameters(r0, r1, r2, u0, u1, u2, w0, w1, w2,
+                                  1.0 / (u0 * u0 + u1 * u1 + u2 * u2),
+                                  1.0 / (w0 * w0 + w1 * w1 + w2 * w2))
+        d0 = r0 + s * u0 - t * w0
+        d1 = r1 + s * u1 - t * w1
+        d2 = r2 + s * u2 - t * w2
         gap = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - radius[i] - radius[j]
         if gap < margin:
             near[0, count] = i
@@ -226,25 +230,7 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         r0 = x[0, i] - x[0, j]
         r1 = x[1, i] - x[1, j]
         r2 = x[2, i] - x[2, j]
-        # closest points x_i + s·u and x_j + t·w (as closest_parameters, with the
-        # reciprocals of |u|² and |w|² from the element pass)
-        a = u0 * u0 + u1 * u1 + u2 * u2
-        e = w0 * w0 + w1 * w1 + w2 * w2
-        b = u0 * w0 + u1 * w1 + u2 * w2
-        c = u0 * r0 + u1 * r1 + u2 * r2
-        f = w0 * r0 + w1 * r1 + w2 * r2
-        denom = a * e - b * b
-        if denom > 1e-12 * a * e:
-            s = min(max((b * f - c * e) / denom, 0.0), 1.0)
-        else:
-            s = 0.0  # parallel segments: any point of the overlap is a closest point
-        t = (b * s + f) * inv_square[j]
-        if t < 0.0:
-            t = 0.0
-            s = min(max(-c * inv_square[i], 0.0), 1.0)
-        elif t > 1.0:
-            t = 1.0
-            s = min(max((b - c) * inv_square[i], 0.0), 1.0)
+        s, t = closest_parameters(r0, r1, r2, u0, u1, u2, w0, w1, w2, inv_square[i], inv_square[j])
         d0 = r0 + s * u0 - t * w0
         d1 = r1 + s * u1 - t * w1
         d2 = r2 + s * u2 - t * w2
