@@ -182,9 +182,9 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     """Add penalty contact forces of the listed pairs to `force` (3, n+1).
 
     Normal force per pair: max(0, k·δ − c·δ̇) along the line of closest approach, with δ the
-    overlap of the two capsules (sum of current radii minus distance). `stiffness` and
-    `damping` are per pair, (n,) arrays indexed by the first element (they are set per
-    element length) and multiplied by `scale` (stiffness) and √scale (dashpot), so that contact
+    overlap of the two capsules (sum of current radii minus distance). The pair's spring and
+    dashpot are `stiffness[i]` and `damping[i]`, (n,) arrays indexed by the pair's first
+    element (they are set per element length) and multiplied by `scale` (stiffness) and √scale (dashpot), so that contact
     follows a modulus ramp. Optional regularised Coulomb friction opposes the relative sliding
     velocity of the two closest points. Forces act at the closest points and are split
     linearly between the two nodes of each element.

@@ -647,7 +647,10 @@ def advance(x, v, Q, w, t_start, n_steps,
                 max_pairs = max(max_pairs, n_pairs)
                 moved_near = np.inf
             # A gap changes by at most the two segments' largest node displacements plus the
-            # growth of the two radii.
+            # growth of the two radii (closest_parameters' fallback for segments parallel to
+            # 1e-6 rad adds up to 1e-6 of an element length: negligible against near_skin).
+            # With near_skin ≥ skin/2 this never fires between grid builds: the old, one-list
+            # behaviour.
             if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
                 n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
                 x_near[:, :] = x

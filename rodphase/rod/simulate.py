@@ -383,7 +383,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     diagnostics = {
         "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
         "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
-        "near_rebuilds": near_rebuilds,        "max_pairs": max_pairs, "max_penetration": max_pen, "final_time": state.time,
+        "near_rebuilds": near_rebuilds, "max_pairs": max_pairs, "max_penetration": max_pen,
+        "final_time": state.time,
         "rest_radius": rod.radius, "rest_length": rod.length, "elements": n,
         "youngs_modulus": rod.youngs_modulus,
         "force_scale": force_scale(problem), "stages": stage_report, "notes": notes,
