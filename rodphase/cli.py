@@ -41,7 +41,13 @@ def reports_errors(func):
     return wrapper
 
 
+def _make_parent(output: str) -> None:
+    # `-o out/run.h5` on a fresh checkout: make `out/` rather than fail in h5py/matplotlib
+    Path(output).parent.mkdir(parents=True, exist_ok=True)
+
+
 def _clear(output: str, force: bool) -> None:
+    _make_parent(output)
     if force and Path(output).exists():
         Path(output).unlink()
 
@@ -152,6 +158,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     counts = table["phase"].value_counts().to_dict()
     click.echo(f"{len(table)} runs: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     if csv_path:
+        _make_parent(csv_path)
         write_table_csv(table, csv_path)
         click.echo(f"table written to {csv_path}")
 
@@ -178,6 +185,7 @@ def plot(store_file, kind, output, run_id, experiments, twist):
     from . import plot as P
     from .store import read_store
 
+    _make_parent(output)
     with read_store(store_file) as store:
         if kind == "phase":
             table = store.table()
@@ -215,6 +223,7 @@ def movie(store_file, run_id, output, fps):
     from . import plot as P
     from .store import read_store
 
+    _make_parent(output)
     with read_store(store_file) as store:
         result = store.read_run(run_id)
     path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps)

@@ -253,3 +253,15 @@ def test_an_under_resolved_run_is_run_again_with_more_elements():
     assert "under-resolved at 12, 24 elements" in refined.diagnostics["notes"][-1]
     # the same protocol: all the twist asked for (Φa·L0/a of end rotation) went in
     assert refined.history["end_rotation"][-1] == pytest.approx(1.2 * cfg.rod.length / cfg.rod.radius)
+
+
+def test_outputs_may_go_into_folders_that_do_not_exist_yet(tmp_path):
+    # `-o out/x.h5` on a fresh checkout: the commands make the folder instead of failing
+    store = tmp_path / "new" / "deeper" / "sweep.h5"
+    result = cli("sweep", sweep_file(tmp_path, samples=1), "-o", store, "--quiet")
+    assert result.exit_code in (0, 1), result.output
+    assert store.exists()
+    table = tmp_path / "tables" / "sweep.csv"
+    assert cli("classify", store, "--csv", table).exit_code == 0 and table.exists()
+    figure = tmp_path / "figures" / "phase.png"
+    assert cli("plot", store, "--kind", "phase", "-o", figure).exit_code == 0 and figure.exists()
