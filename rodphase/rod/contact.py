@@ -184,10 +184,10 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     Normal force per pair: max(0, k·δ − c·δ̇) along the line of closest approach, with δ the
     overlap of the two capsules (sum of current radii minus distance). The pair's spring and
     dashpot are `stiffness[i]` and `damping[i]`, (n,) arrays indexed by the pair's first
-    element (they are set per element length) and multiplied by `scale` (stiffness) and √scale (dashpot), so that contact
-    follows a modulus ramp. Optional regularised Coulomb friction opposes the relative sliding
-    velocity of the two closest points. Forces act at the closest points and are split
-    linearly between the two nodes of each element.
+    element (they are set per element length), multiplied by `scale` (stiffness) and √scale
+    (dashpot) so that contact follows a modulus ramp. Optional regularised Coulomb friction
+    opposes the relative sliding velocity of the two closest points. Forces act at the
+    closest points and are split linearly between the two nodes of each element.
 
     With `thinning` (1.0 for an incompressible rod, whose radius is a0/√e), the overlap also
     depends on the two elements' lengths; the spring then pulls each element's nodes apart
