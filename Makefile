@@ -38,7 +38,7 @@ bench: $(STAMP)  ## kernel and topology benchmarks against PyElastica (installs 
 	$(BIN)/python scripts/bench_kernel.py --write docs/benchmarks.md
 	$(BIN)/python scripts/bench_topology.py
 
-phase: $(STAMP)  ## the DESIGN's Fig 3 box, rest twist axis (configs/fig3_phase.yaml)
+phase: $(STAMP)  ## Fig 3 over the rest rod's twist density (configs/fig3_phase.yaml); fig3 is the paper's axis
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_phase.yaml -o $(OUT)/fig3.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3.h5 --csv $(OUT)/fig3.csv
