@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import sys
+from collections import Counter
 from pathlib import Path
 
 import click
@@ -128,10 +129,15 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
     report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
                        scheduler=scheduler, retry_failed=retry_failed, progress=not quiet,
                        echo=click.echo)
-    click.echo(f"{report.done} ok, {report.failed} failed, {report.skipped} skipped of "
-               f"{report.total} in {report.wall:.1f} s; written to {output}")
+    by_status = Counter(status for _, status, _ in report.failures)
+    counts = ", ".join(f"{n} {status}" for status, n in sorted(by_status.items())) or "0 failed"
+    click.echo(f"{report.done} ok, {counts}, {report.skipped} skipped of {report.total} in "
+               f"{report.wall:.1f} s; written to {output}")
     for run_id, status, message in report.failures:
         click.echo(f"  {run_id}: {status}: {message}")
+    if by_status.get("not_converged"):
+        click.echo("  (a not_converged run keeps its final shape: it is classified, and its "
+                   "status says the hold ran out of time)")
     sys.exit(0 if report.failed == 0 else 1)
 
 

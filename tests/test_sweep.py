@@ -62,12 +62,20 @@ def test_sweep_classify_plot_end_to_end(tmp_path):
     result = cli("sweep", sweep_file(tmp_path), "-o", out, "--jobs", 1, "--quiet")
     assert result.exit_code in (0, 1), result.output
     assert "Launching 4 of 4 runs" in result.output
+    sweep_output = result.output
     result = cli("classify", out, "--csv", tmp_path / "table.csv")
     assert result.exit_code == 0, result.output
     table = pd.read_csv(tmp_path / "table.csv")
     assert len(table) == 4
     assert {"twist_density", "extension", "alignment", "phase", "link", "twist", "writhe",
             "status"} <= set(table.columns)
+    # the summary line counts every run by its status, as the table does
+    summary = next(line for line in sweep_output.splitlines() if "skipped of 4" in line)
+    counts = dict(table["status"].value_counts())
+    said = {word: int(n) for n, word in
+            (part.split() for part in summary.split(", 0 skipped")[0].split(", "))}
+    said.pop("failed", None)  # "0 failed" when every run is ok
+    assert said == {k: int(v) for k, v in counts.items()}, summary
     assert set(table["phase"]) <= {"straight", "plectoneme", "solenoid", "mixed", "failed"}
     ok = table[table["status"] == "ok"]
     # link = twist + writhe for every run, to the accuracy of the open-ribbon closure
