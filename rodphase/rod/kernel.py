@@ -530,7 +530,6 @@ def advance(x, v, Q, w, t_start, n_steps,
     n_near = 0
     near_rebuilds = 0
     radius_cut = 0.0
-    need_build = True
     rebuilds = 0
     max_pairs = 0
     max_penetration = 0.0
@@ -633,7 +632,7 @@ def advance(x, v, Q, w, t_start, n_steps,
                 widest = max(widest, radius[i])
             # A pair outside the long list needs its gap to shrink by > skin: midpoints and
             # half-lengths each move by at most the largest node displacement, so 4·moved.
-            if need_build or 16.0 * moved > skin * skin or widest > radius_cut:
+            if rebuilds == 0 or 16.0 * moved > skin * skin or widest > radius_cut:
                 longest = 0.0
                 for i in range(n):
                     longest = max(longest, lengths[i])
@@ -642,7 +641,6 @@ def advance(x, v, Q, w, t_start, n_steps,
                 if near.shape[1] < pairs.shape[1]:
                     near = np.empty((2, pairs.shape[1]), dtype=np.int64)
                 x_build[:, :] = x
-                need_build = False
                 rebuilds += 1
                 max_pairs = max(max_pairs, n_pairs)
                 moved_near = np.inf

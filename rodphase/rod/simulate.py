@@ -16,19 +16,13 @@ from ..result import HISTORY_COLUMNS, RunResult
 from . import kernel as k
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
-# short names of the guards, for diagnostics["guard"] (what a caller may act on)
-GUARD_CODES = {
-    k.S_NAN: "non_finite",
-    k.S_SPEED: "speed",
-    k.S_PENETRATION: "penetration",
-    k.S_RESOLUTION: "resolution",
-}
-
-_GUARD_NAMES = {
-    k.S_NAN: "non-finite state (NaN or inf)",
-    k.S_SPEED: "runaway velocity",
-    k.S_PENETRATION: "contact penetration",
-    k.S_RESOLUTION: "under-resolved rod (neighbouring frames turned by more than 135°)",
+# per guard: the short name for diagnostics["guard"] (what a caller may act on) and the
+# words for the message
+_GUARDS = {
+    k.S_NAN: ("non_finite", "non-finite state (NaN or inf)"),
+    k.S_SPEED: ("speed", "runaway velocity"),
+    k.S_PENETRATION: ("penetration", "contact penetration"),
+    k.S_RESOLUTION: ("resolution", "under-resolved rod (neighbouring frames turned by more than 135°)"),
 }
 
 
@@ -335,16 +329,16 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                              "settled": bool(code == k.S_EQUILIBRIUM and info[k.D_SETTLED]),
                              "residual": float(info[k.D_RESIDUAL]),
                              "settle_motion": float(info[k.D_SETTLE_MOTION])})
-        if code in _GUARD_NAMES:
+        if code in _GUARDS:
             status = "unstable"
-            guard = GUARD_CODES[code]
+            guard, guard_words = _GUARDS[code]
             where = int(info[k.D_WHERE])
             unit = {k.S_PENETRATION: "element", k.S_RESOLUTION: "Voronoi domain"}.get(code, "node")
             advice = ("Use more rod.elements (twist per element = Φa·L0/(a·n) rad)."
                       if code == k.S_RESOLUTION else
                       "Try a smaller solver.dt or solver.safety, more solver.damping, or a "
                       "stiffer contact.stiffness.")
-            message = (f"unstable in {label} at t = {t_end:.4g} s: {_GUARD_NAMES[code]} at {unit} "
+            message = (f"unstable in {label} at t = {t_end:.4g} s: {guard_words} at {unit} "
                        f"{where} (value {info[k.D_VALUE]:.3g}); dt = {dt:.3g} s, stable bound "
                        f"{bound:.3g} s. {advice}")
             break
