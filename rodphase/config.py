@@ -160,6 +160,11 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "end_axial": (choice("force", "displacement", "free"), "force"),
         "end_lateral": (choice("held", "free"), "held"),
         "end_rotation": (choice("held", "free"), "held"),
+        # the bodies a clamped start and a laterally held end are fixed to take part in
+        # contact (a cylinder on the axis beyond the end); "none" lets a loop slip over the end
+        "start_body": (choice("rod", "none"), "rod"),
+        "end_body": (choice("rod", "none"), "rod"),
+        "body_radius": (number(0, 20, strict_min=True, unit="rest radii"), 1.0),
     },
     "loading": {
         "force_multiple": (number(0, 1000, unit="F_C = pi^2 E I / L0^2", nullable=True), None),

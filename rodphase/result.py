@@ -24,7 +24,8 @@ HISTORY_COLUMNS = (
     "residual",  # largest free nodal force / force scale
     "stiffness_factor",
     "radius_factor",
-    "contact_energy",  # J, penalty springs
+    "contact_energy",  # J, penalty springs (rod on rod and rod on the end bodies)
+    "start_rotation",  # rad, the start rotation control
 )
 
 

@@ -7,6 +7,7 @@ its experiment needs. Orientation: the rod starts at the origin along +z; the st
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -49,7 +50,9 @@ def ends_from(cfg) -> Ends:
     lateral = e.end_lateral == "held"
     return Ends(start_held=start_held, start_frame_held=e.start == "clamped",
                 end_held=(lateral, lateral, e.end_axial == "displacement"),
-                end_frame_held=e.end_rotation == "held")
+                end_frame_held=e.end_rotation == "held",
+                start_body=e.start == "clamped" and e.start_body == "rod",
+                end_body=lateral and e.end_body == "rod", body_radius=e.body_radius)
 
 
 def imperfection(cfg, rod: Rod) -> np.ndarray:
@@ -114,8 +117,8 @@ def solenoid_loss(cfg) -> Problem:
     force = C.load_force(cfg) or 0.0
     turns = C.twist_turns(cfg)
     duration = cfg.pull.distance / cfg.pull.rate
-    pull_ends = Ends(start_held=(True,) * 3, start_frame_held=True, end_held=(True, True, True),
-                     end_frame_held=True)
+    pull_ends = dataclasses.replace(ends_from(cfg), start_held=(True,) * 3, start_frame_held=True,
+                                    end_held=(True, True, True), end_frame_held=True)
     pull = Stage(duration, label="pull", ends=pull_ends, controls=Controls(
         end_rotation=constant(TURN * turns), end_displacement=ramp(0, duration, 0, cfg.pull.distance)))
     base.stages = base.stages + (pull,)

@@ -323,3 +323,31 @@ def test_bad_shapes_raise():
         writhe(pts, extension=-1.0)
     with pytest.raises(ValueError, match="normals_history"):
         topology_history(pts[None], d1[None, :-1])
+
+
+def test_link_counts_the_rotation_of_both_clamps():
+    # A straight rod clamped at both ends whose start turns by -0.3 turns and whose end by
+    # +0.45 turns carries Lk = Tw = 0.75 turns, Wr = 0 (it stays straight well below the
+    # Greenhill onset). Before the fix the start clamp was taken at its first angle (Lk 0.45).
+    # 1e-6: the twist of a straight rod is exact up to the closure's round-off.
+    from rodphase.rod import Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp, simulate
+    from rodphase.rod.model import straight_state
+
+    turn = 2 * np.pi
+    rod = Rod(length=1.0, radius=0.025, elements=16)
+    ends = Ends(start_held=(True,) * 3, start_frame_held=True, end_held=(True, True, False),
+                end_frame_held=True)
+    twist = Controls(start_rotation=ramp(0, 1.0, 0, -0.3 * turn), end_rotation=ramp(0, 1.0, 0, 0.45 * turn))
+    hold = Controls(start_rotation=constant(-0.3 * turn), end_rotation=constant(0.45 * turn))
+    problem = Problem(rod=rod, state=straight_state(rod), ends=ends, solver=Solver(damping=40.0),
+                      stages=(Stage(1.0, controls=twist), Stage(0.5, controls=hold)))
+    result = simulate(problem, topology=True)
+    assert result.ok, result.message
+    h = result.history
+    assert h["start_rotation"][-1] == pytest.approx(-0.3 * turn)
+    assert h["link"][-1] == pytest.approx(0.75, abs=1e-6)
+    assert h["twist"][-1] == pytest.approx(0.75, abs=1e-6)
+    assert abs(h["writhe"][-1]) < 1e-6
+    turns = (h["end_rotation"] - h["start_rotation"]) / turn
+    assert np.max(np.abs(h["link"] - turns)) < 1e-3  # all along the ramp too
+    assert h["link_escapes"][-1] == 0

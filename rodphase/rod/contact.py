@@ -289,6 +289,96 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     return touching, worst, worst_element, energy
 
 
+@njit(cache=True, fastmath=_FASTMATH)
+def add_body_forces(x, v, radius, stiffness, damping, scale, end, side, axis, body_radius,
+                    exclusion, force):
+    """Contact of the rod with the rigid body that a held end is fixed to.
+
+    The body is a semi-infinite solid cylinder of radius `body_radius` on the rod's axis line,
+    starting at node `end` (0 or n) with a flat cap and running away from the rod
+    (direction side·axis, side = −1 at the start, +1 at the end): the loading rod or the
+    weight's hanger of the experiment. Each node is a sphere of the current radius of its
+    elements; the penalty law is that of the rod's own contact (spring `stiffness`, dashpot
+    `damping` of the node's elements, times `scale` and √scale). The reaction acts on node
+    `end`, which carries the body. Nodes within `exclusion` elements of `end` are the rod's
+    own end and never touch it.
+
+    Returns (touching nodes, largest overlap / radius, spring energy Σ ½·k·δ²).
+    """
+    n = radius.shape[0]
+    u0 = side * axis[0]
+    u1 = side * axis[1]
+    u2 = side * axis[2]
+    damping_scale = np.sqrt(scale)
+    touching = 0
+    worst = 0.0
+    energy = 0.0
+    for i in range(n + 1):
+        if (end == 0 and i <= exclusion) or (end != 0 and i >= end - exclusion):
+            continue
+        lo = max(i - 1, 0)
+        hi = min(i, n - 1)
+        a = 0.5 * (radius[lo] + radius[hi])
+        r0 = x[0, i] - x[0, end]
+        r1 = x[1, i] - x[1, end]
+        r2 = x[2, i] - x[2, end]
+        h = r0 * u0 + r1 * u1 + r2 * u2
+        if h < -a:
+            continue  # behind the cap by more than a radius: the common case, cheap
+        q0 = r0 - h * u0
+        q1 = r1 - h * u1
+        q2 = r2 - h * u2
+        r = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+        if r >= body_radius + a:
+            continue
+        if h >= 0.0 and r <= body_radius:
+            # inside the body: leave by the nearer face (side or cap)
+            if body_radius - r < h and r > 0.0:
+                overlap = a + body_radius - r
+                n0 = q0 / r
+                n1 = q1 / r
+                n2 = q2 / r
+            else:
+                overlap = a + h
+                n0 = -u0
+                n1 = -u1
+                n2 = -u2
+        else:
+            # outside: the closest point of the body is on its side, its cap or its rim
+            rc = min(r, body_radius)
+            hc = max(h, 0.0)
+            scale_q = rc / r if r > 0.0 else 0.0
+            d0 = r0 - scale_q * q0 - hc * u0
+            d1 = r1 - scale_q * q1 - hc * u1
+            d2 = r2 - scale_q * q2 - hc * u2
+            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if dist >= a or dist <= 0.0:
+                continue
+            overlap = a - dist
+            n0 = d0 / dist
+            n1 = d1 / dist
+            n2 = d2 / dist
+        touching += 1
+        k = scale * 0.5 * (stiffness[lo] + stiffness[hi])
+        c = damping_scale * 0.5 * (damping[lo] + damping[hi])
+        spring = k * overlap
+        energy += 0.5 * spring * overlap
+        if overlap > worst * a:
+            worst = overlap / a
+        vn = ((v[0, i] - v[0, end]) * n0 + (v[1, i] - v[1, end]) * n1
+              + (v[2, i] - v[2, end]) * n2)
+        fn = spring - c * vn
+        if fn <= 0.0:
+            continue
+        force[0, i] += fn * n0
+        force[1, i] += fn * n1
+        force[2, i] += fn * n2
+        force[0, end] -= fn * n0
+        force[1, end] -= fn * n1
+        force[2, end] -= fn * n2
+    return touching, worst, energy
+
+
 def brute_force_pairs(x, exclusion, cutoff):
     """All pairs within `cutoff` by the O(n²) definition; the reference the grid is tested against."""
     mid = 0.5 * (x[:, 1:] + x[:, :-1])

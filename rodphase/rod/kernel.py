@@ -25,7 +25,7 @@ import numpy as np
 
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
-from .contact import add_contact_forces, build_pairs, near_pairs
+from .contact import add_body_forces, add_contact_forces, build_pairs, near_pairs
 
 # integer settings
 I_INCOMPRESSIBLE = 0
@@ -40,7 +40,9 @@ I_SEGMENT_LAST = 12
 I_HISTORY_EVERY = 13
 I_CHECK_EVERY = 14
 I_STOP_AT_EQUILIBRIUM = 15
-N_INTS = 16
+I_START_BODY = 16  # 1: a rigid rod beyond node 0, along -axis, takes part in contact
+I_END_BODY = 17  # 1: a rigid rod beyond node n, along +axis (the loading rod), ditto
+N_INTS = 18
 
 # float settings
 F_DT = 0
@@ -63,7 +65,8 @@ F_DRAG_RADIUS = 22  # m: lever that turns spin into a surface speed for the quad
 F_SETTLE_WINDOW = 23  # s: window over which the mean shape is compared (0: residual test only)
 F_SETTLE_DISTANCE = 24  # m: the mean shape settled if no surface point moved more than this
 F_NEAR_SKIN = 25  # m: gap below which a candidate pair enters the short (near) contact list
-N_FLOATS = 26
+F_BODY_RADIUS = 26  # m: radius of the end bodies (I_START_BODY, I_END_BODY)
+N_FLOATS = 27
 
 # control tables
 T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
@@ -92,7 +95,8 @@ H_RESIDUAL = 11  # largest free nodal force / force scale
 H_STIFFNESS = 12
 H_RADIUS_FACTOR = 13
 H_CONTACT_ENERGY = 14
-N_HISTORY = 15
+H_START_ROTATION = 15  # rad, the start rotation control
+N_HISTORY = 16
 
 # status codes
 S_COMPLETED = 0
@@ -657,6 +661,24 @@ def advance(x, v, Q, w, t_start, n_steps,
             touching, worst, worst_at, contact_energy = add_contact_forces(
                 x, v, radius, near, n_near, contact_k, contact_c, f_stiff, friction, slip_speed,
                 1.0 if incompressible else 0.0, force)
+            # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
+            # strand can pass around such an end, so link leaves only where the scene lets it.
+            if ints[I_START_BODY] != 0:
+                body_touching, body_worst, body_energy = add_body_forces(
+                    x, v, radius, contact_k, contact_c, f_stiff, 0, -1.0, axis,
+                    floats[F_BODY_RADIUS], exclusion, force)
+                touching += body_touching
+                contact_energy += body_energy
+                if body_worst > worst:
+                    worst, worst_at = body_worst, 0
+            if ints[I_END_BODY] != 0:
+                body_touching, body_worst, body_energy = add_body_forces(
+                    x, v, radius, contact_k, contact_c, f_stiff, n, 1.0, axis,
+                    floats[F_BODY_RADIUS], exclusion, force)
+                touching += body_touching
+                contact_energy += body_energy
+                if body_worst > worst:
+                    worst, worst_at = body_worst, n - 1
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -799,6 +821,8 @@ def advance(x, v, Q, w, t_start, n_steps,
                 history[rows, H_STIFFNESS] = f_stiff
                 history[rows, H_RADIUS_FACTOR] = f_radius
                 history[rows, H_CONTACT_ENERGY] = contact_energy
+                history[rows, H_START_ROTATION] = table_value(
+                    table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_next)
                 rows += 1
 
         # drift: a full step, or half a step to land on t + dt at the end

@@ -86,6 +86,13 @@ class Ends:
     end_held: tuple[bool, bool, bool] = (False, False, False)
     end_frame_held: bool = False
     axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    # Rigid bodies the ends are fixed to, taking part in self-contact (see
+    # contact.add_body_forces): a cylinder on the axis line beyond the end, running away from
+    # the rod, of body_radius rest radii. With them no strand can pass around a held end, so
+    # link stays what was put in, as in the experiment (a weight's hanger, a clamp's holder).
+    start_body: bool = False
+    end_body: bool = False
+    body_radius: float = 1.0
 
 
 @dataclass(frozen=True)

@@ -117,6 +117,8 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     ints[k.I_HISTORY_EVERY] = history_every
     ints[k.I_CHECK_EVERY] = solver.check_interval
     ints[k.I_STOP_AT_EQUILIBRIUM] = until_equilibrium
+    ints[k.I_START_BODY] = ends.start_body
+    ints[k.I_END_BODY] = ends.end_body
     floats = np.zeros(k.N_FLOATS)
     floats[k.F_DT] = dt
     floats[k.F_DAMPING] = solver.damping
@@ -127,6 +129,7 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     floats[k.F_SLIP_SPEED] = contact.slip_speed
     floats[k.F_SKIN] = contact.skin * rod.radius
     floats[k.F_NEAR_SKIN] = contact.near_skin * rod.radius
+    floats[k.F_BODY_RADIUS] = ends.body_radius * rod.radius
     floats[k.F_PENETRATION_LIMIT] = contact.penetration_limit
     c_axial = math.sqrt(rod.youngs_modulus / rod.density)
     floats[k.F_SPEED_LIMIT] = solver.speed_limit if solver.speed_limit is not None else c_axial
@@ -184,15 +187,28 @@ def clamp_twist(problem: Problem, start_frame, end_frame, history, positions, d1
     if problem.ends.start_frame_held:
         t0 = positions[:, 1] - positions[:, 0]
         t0 /= np.linalg.norm(t0, axis=1)[:, None]
-        start_angle = problem.controls.start_rotation[1][0]
-        clamp = Rotation.from_rotvec(axis * start_angle).apply(start_frame[0])
-        extra += _signed_angle(np.tile(clamp, (len(positions), 1)), d1[:, 0], t0)
+        clamp = Rotation.from_rotvec(history["start_rotation"][:, None] * axis).apply(start_frame[0])
+        extra += _signed_angle(clamp, d1[:, 0], t0)
     if problem.ends.end_frame_held:
         t1 = positions[:, -1] - positions[:, -2]
         t1 /= np.linalg.norm(t1, axis=1)[:, None]
         clamp = Rotation.from_rotvec(history["end_rotation"][:, None] * axis).apply(end_frame[0])
         extra += _signed_angle(d1[:, -1], clamp, t1)
     return extra / (2 * np.pi)
+
+
+# A change of link between two history rows that the clamps did not put in, larger than this
+# (turns), is an escape: link moves in whole crossings (a strand passing around an end changes
+# Lk by ±2, through the closure), while Lk = Tw + Wr and the clamp bookkeeping hold to 1e-6.
+ESCAPE_THRESHOLD = 0.5
+
+
+def link_escapes(history: dict) -> np.ndarray:
+    """Per history row, the link (turns) that left or entered the rod since the row before,
+    beyond what the two clamps put in; 0 where nothing escaped. Needs both frames held."""
+    turns_in = (history["end_rotation"] - history["start_rotation"]) / (2 * np.pi)
+    surplus = np.diff(history["link"] - turns_in, prepend=history["link"][:1] - turns_in[:1])
+    return np.where(np.abs(surplus) > ESCAPE_THRESHOLD, surplus, 0.0)
 
 
 def rotational_damping_auto(rod) -> float:
@@ -369,6 +385,15 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         # belongs to the rod, so that a rod clamped at both ends carries Lk = turns put in.
         extra = clamp_twist(problem, start_frame, end_frame, history, snapshot_positions, snapshot_d1)
         history["link"], history["twist"], history["writhe"] = lk + extra, tw + extra, wr
+        if problem.ends.start_frame_held and problem.ends.end_frame_held:
+            escapes = link_escapes(history)
+            history["link_escapes"] = np.cumsum(np.abs(escapes) > 0).astype(float)
+            events = [{"time": float(history["time"][i]), "delta_link": float(escapes[i])}
+                      for i in np.flatnonzero(escapes)]
+            if events:
+                notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
+                             + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
+                                         for e in events) + ")")
 
     lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
     rest = arrays["rest_length"]
