@@ -24,7 +24,7 @@ demo: $(STAMP)  ## run configs/quick.yaml (a small phase diagram) and draw its p
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/quick.yaml -o $(OUT)/quick.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/quick.h5 --csv $(OUT)/quick.csv
-	$(BIN)/rodphase plot $(OUT)/quick.h5 --kind phase --twist current -o $(OUT)/quick_phase.png
+	$(BIN)/rodphase plot $(OUT)/quick.h5 --kind phase -o $(OUT)/quick_phase.png
 	@echo "phase map: $(OUT)/quick_phase.png  data: $(OUT)/quick.h5  table: $(OUT)/quick.csv"
 
 test: $(STAMP)  ## run the test suite
@@ -38,17 +38,18 @@ bench: $(STAMP)  ## kernel and topology benchmarks against PyElastica (installs 
 	$(BIN)/python scripts/bench_kernel.py --write docs/benchmarks.md
 	$(BIN)/python scripts/bench_topology.py
 
-phase: $(STAMP)  ## Fig 3 over the rest rod's twist density (configs/fig3_phase.yaml); fig3 is the paper's axis
+phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
-	$(BIN)/rodphase sweep configs/fig3_phase.yaml -o $(OUT)/fig3.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
-	$(BIN)/rodphase classify $(OUT)/fig3.h5 --csv $(OUT)/fig3.csv
-	$(BIN)/rodphase plot $(OUT)/fig3.h5 --kind phase -o $(OUT)/fig3_phase.png
+	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/rodphase classify $(OUT)/fig3_stretched.h5 --csv $(OUT)/fig3_stretched.csv
+	$(BIN)/rodphase plot $(OUT)/fig3_stretched.h5 --kind phase --twist current -o $(OUT)/fig3_stretched.png
+	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_stretched.csv --column phi_a_current --above 1.1
 
-fig3: $(STAMP)  ## the paper's Fig 3 in its twist axis, with the Phi_c fit (~2 min on 2 cores)
+fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, with the Phi_c fit
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_paper.yaml -o $(OUT)/fig3_paper.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3_paper.h5 --csv $(OUT)/fig3_paper.csv
-	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase --twist current -o $(OUT)/fig3_paper.png
+	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
 	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
 
 figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)

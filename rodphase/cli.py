@@ -181,8 +181,9 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
 @click.option("--experiments", type=click.Path(exists=True, dir_okay=False),
               help="CSV of experimental points (twist_density, extension, kind) to overlay.")
 @click.option("--twist", type=click.Choice(["rest", "current"]), default="rest", show_default=True,
-              help="Phase map x axis: Φa with rest length and radius, or with the length and "
-              "radius of the stretched straight rod (Φa_rest / e^1.5).")
+              help="Phase map twist axis (vertical; L/L0 is horizontal): rest = the paper's "
+              "Φa = θ·a0/L0 (end rotation θ, rest radius a0, rest length L0); current = Φa of "
+              "the stretched straight rod, θ·(a0/√e)/(e·L0) = rest Φa / e^1.5.")
 @reports_errors
 def plot(store_file, kind, output, run_id, experiments, twist):
     """Draw a figure from OUT.h5."""
@@ -200,7 +201,7 @@ def plot(store_file, kind, output, run_id, experiments, twist):
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
-            P.phase_map(table, output, experiments=exp, x=column)
+            P.phase_map(table, output, experiments=exp, twist=column)
         elif kind == "shape":
             ids = store.run_ids()[:12]
             shapes = [(i, store.read_run(i).positions, store.read_run(i).rest_radius) for i in ids]

@@ -206,6 +206,9 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "max_steps": (number(1, integer=True, nullable=True), None),
         # a run stopped as under-resolved is run again with twice the elements, up to this
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
+        # a hold ends only at an equilibrium that survives a perturbation of this size
+        "stability_probe": (boolean, False),
+        "probe_size": (number(0, 1, strict_min=True, unit="rest radii"), 0.1),
     },
     "output": {
         "history_interval": (number(0, strict_min=True, unit="s"), 0.1),

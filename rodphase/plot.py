@@ -47,7 +47,7 @@ ALIGNMENT_CMAP = matplotlib.colormaps["PuOr"].with_extremes(bad="0.6")
 PHASE_MARKERS = {"straight": "o", "plectoneme": "s", "solenoid": "^", "mixed": "D"}
 OTHER_MARKER = "P"
 EXPERIMENT_MARKERS = ("h", "p", "*", "X", "8", "v")
-TWIST_DENSITY_LABEL = r"twist density $\Phi a$ (rad)"
+TWIST_DENSITY_LABEL = r"twist density $\Phi a = \theta a_0 / L_0$ (rad)"
 
 
 def _figure(**kwargs) -> Figure:
@@ -64,18 +64,19 @@ def _save(fig: Figure, path) -> Path:
 
 
 def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = None,
-              title: str | None = None, x: str = "twist_density") -> Path:
+              title: str | None = None, twist: str = "twist_density") -> Path:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
-    x = twist density Φa (column `x`: "twist_density", or "phi_a_rest" / "phi_a_current"
-    of the classified table), y = extension L/L0 ("extension"); colour =
+    x = extension L/L0 ("extension"), y = twist density Φa (column `twist`: "twist_density",
+    or "phi_a_rest" / "phi_a_current" of the classified table), as the paper's Fig 3 has it:
+    pulling at a fixed end rotation is then a horizontal path; colour =
     "alignment" (−1 plectoneme … +1 solenoid, NaN grey), marker = "phase"; runs whose hold
     ran out of time ("not_converged") are drawn by their shape with a black dot; runs that
     failed otherwise are small black crosses. `experiments` (columns twist_density,
     extension, kind ∈ {plectoneme, solenoid}, optional series) are overlaid in black:
     hollow for plectoneme onsets, solid for solenoid onsets, one marker shape per series.
     """
-    table = table.rename(columns={x: "twist_density"}) if x != "twist_density" else table
+    table = table.rename(columns={twist: "twist_density"}) if twist != "twist_density" else table
     missing = [c for c in ("twist_density", "extension") if c not in table.columns]
     if missing:
         raise ValueError(f"phase_map needs columns {missing}; the table has {list(table.columns)}")
@@ -99,28 +100,28 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
             if not rows.any():
                 continue
             marker = PHASE_MARKERS.get(name, OTHER_MARKER)
-            ax.scatter(table.loc[rows, "twist_density"], table.loc[rows, "extension"],
+            ax.scatter(table.loc[rows, "extension"], table.loc[rows, "twist_density"],
                        c=alignment[rows], cmap=ALIGNMENT_CMAP, norm=norm, marker=marker, s=42,
                        edgecolors="0.25", linewidths=0.5, plotnonfinite=True, zorder=2)
             face = "0.6" if name == "straight" else "0.9"  # straight is the grey of NaN
             handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc=face, mec="0.25",
                                   label=name if name != "?" else "unclassified"))
         if creeping.any():
-            ax.scatter(table.loc[creeping, "twist_density"], table.loc[creeping, "extension"],
+            ax.scatter(table.loc[creeping, "extension"], table.loc[creeping, "twist_density"],
                        marker=".", s=6, c="black", zorder=3)
             handles.append(Line2D([], [], ls="", marker=".", ms=4, color="black",
                                   label=f"not converged ({int(creeping.sum())})"))
         if (~ok).any():
-            ax.scatter(table.loc[~ok, "twist_density"], table.loc[~ok, "extension"], marker="x",
+            ax.scatter(table.loc[~ok, "extension"], table.loc[~ok, "twist_density"], marker="x",
                        s=18, c="black", linewidths=0.9, zorder=3)
             handles.append(Line2D([], [], ls="", marker="x", ms=5, color="black",
                                   label=f"failed ({int((~ok).sum())})"))
         if experiments is not None and len(experiments):
             handles += _experiments(ax, experiments)
 
-        ax.set_xlabel(TWIST_DENSITY_LABEL if x != "phi_a_current" else
+        ax.set_ylabel(TWIST_DENSITY_LABEL if twist != "phi_a_current" else
                       r"twist density $\Phi a$ of the stretched rod (rad)")
-        ax.set_ylabel(r"extension $L/L_0$")
+        ax.set_xlabel(r"extension $L/L_0$")
         if title:
             ax.set_title(title)
         bar = fig.colorbar(ScalarMappable(norm, ALIGNMENT_CMAP), ax=ax,
@@ -147,7 +148,7 @@ def _experiments(ax, experiments: pd.DataFrame) -> list:
         marker = EXPERIMENT_MARKERS[i % len(EXPERIMENT_MARKERS)]
         for k, face in (("plectoneme", "none"), ("solenoid", "black")):
             rows = (series == name) & (kind == k)
-            ax.scatter(experiments.loc[rows, "twist_density"], experiments.loc[rows, "extension"],
+            ax.scatter(experiments.loc[rows, "extension"], experiments.loc[rows, "twist_density"],
                        marker=marker, s=40, facecolors=face, edgecolors="black", linewidths=1.0,
                        zorder=4)
         handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc="none", mec="black",

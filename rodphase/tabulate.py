@@ -26,7 +26,8 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     row["end_rotation_turns"] = float(h["end_rotation"][-1] / (2 * np.pi))
     # twist density with rest length and radius, and of the straight stretched rod
     # (L = e L0, a = a0/√e, e from the applied load): papers use either
-    row["phi_a_rest"] = float(h["end_rotation"][-1] * radius / rest_length)
+    turned = h["end_rotation"][-1] - (h["start_rotation"][-1] if "start_rotation" in h else 0.0)
+    row["phi_a_rest"] = float(turned * radius / rest_length)
     stiffness = d.get("youngs_modulus", np.nan) * np.pi * radius**2
     e_load = 1.0 / (1.0 - float(h["applied_force"][-1]) / stiffness)
     row["phi_a_current"] = row["phi_a_rest"] / e_load**1.5

@@ -1,6 +1,6 @@
 """Critical twist density against extension from a classified sweep (paper Fig 3).
 
-    python scripts/critical_twist.py TABLE.csv [--column phi_a_current] [--above 1.1]
+    python scripts/critical_twist.py TABLE.csv [--column phi_a_rest] [--above 1.1]
 
 Bins the runs by extension L/L0; in each bin the critical Φa is the midpoint between the
 largest Φa still straight and the smallest Φa that buckled (any non-straight phase). A
@@ -33,7 +33,8 @@ def critical_points(table: pd.DataFrame, column: str, bins: int):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("table")
-    parser.add_argument("--column", default="phi_a_current")
+    parser.add_argument("--column", default="phi_a_rest",
+                        help="phi_a_rest (the paper's Φa = θ·a0/L0) or phi_a_current")
     parser.add_argument("--above", type=float, default=1.1)
     parser.add_argument("--bins", type=int, default=10)
     args = parser.parse_args()

@@ -147,6 +147,47 @@ def test_greenhill_buckling_onset_within_two_percent():
             assert result.ok
 
 
+def _greenhill_hold(fraction, probe):
+    # the rod of the onset test above, twisted to fraction × the clamped Greenhill moment and
+    # held until equilibrium with the scenes' damping (20/s) and tolerance (1e-3)
+    rod = Rod(length=1.0, radius=0.01, elements=50)
+    bending = rod.bending_stiffness
+    tension = 100 * bending / rod.length**2
+    stretch = 1.0 / (1.0 - tension / (rod.youngs_modulus * rod.area))
+    m_c = greenhill_critical_moment(tension, stretch * rod.length, bending / stretch**2)
+    theta = fraction * m_c * rod.length / rod.twist_stiffness * stretch**3
+    state = straight_state(rod, twist_turns=theta / (2 * math.pi))
+    state.x[2] *= stretch
+    problem = Problem(rod=rod, state=state, ends=Ends(end_held=(True, True, False), end_frame_held=True),
+                      controls=Controls(end_force=constant(tension)),
+                      solver=Solver(damping=20.0, tolerance=1e-3, history_interval=0.1,
+                                    stability_probe=probe),
+                      stages=(Stage(30.0, until_equilibrium=True),))
+    result = simulate(problem)
+    # the history's rows and the final state: a hold may end before its first row
+    shapes = np.concatenate([result.snapshot_positions, result.positions[None]])
+    lateral = np.linalg.norm(shapes[:, :, :2], axis=2).max(axis=1)
+    return result, lateral, result.diagnostics["stages"][0]
+
+
+def test_a_hold_keeps_a_stable_straight_rod_and_leaves_an_unstable_one():
+    # The straight twisted rod is an equilibrium at any twist; the residual test alone ends
+    # the hold there even above the onset (checked: probe off at 1.01 M_c ends `ok`, straight).
+    # With the stability probe (a seeded lateral displacement of 0.1 radius = 1e-3 m; accepted
+    # only once the rod is back within a tenth of it) the rod is kept straight at 0.99 M_c
+    # (lateral < 1e-4 m plus the half step after the test) and leaves the straight state at
+    # 1.01 M_c (grows past 3 probe sizes, to centimetres: measured 7e-2 m).
+    unprobed, lateral, _ = _greenhill_hold(1.01, probe=False)
+    assert unprobed.ok and lateral[-1] < 1e-6
+    kept, lateral, stage = _greenhill_hold(0.99, probe=True)
+    assert kept.ok, kept.message
+    assert stage["probes"] >= 1 and stage["probes_left"] == 0
+    assert lateral[-1] < 1.2e-4
+    left, lateral, stage = _greenhill_hold(1.01, probe=True)
+    assert stage["probes_left"] >= 1
+    assert lateral.max() > 1e-2, lateral.max()
+
+
 def test_prescribed_end_rotation_is_applied_exactly():
     # PyElastica's examples apply ~0.9x the asked rotation (damping after the boundary
     # condition). Here the clamp frame is set from the table, so the twist moment after a

@@ -227,3 +227,13 @@ def test_active_agent_makes_a_loop_in_the_relaxed_segment():
     assert len(touching)
     lo, hi = cfg.agent.first * n, cfg.agent.last * n
     assert touching.min() >= lo - 2 and touching.max() <= hi + 2, touching
+
+
+def test_an_unloaded_rod_twisted_past_its_onset_does_not_end_straight():
+    # The case: no load, rest Phi*a = 0.21, above the clamped onset (0.17). Without
+    # the stability probe the hold ends at once on the straight (unstable) equilibrium; with
+    # it the rod buckles into a loop (measured Wr 0.94, as a 40 s hold by time gives).
+    cfg, r = run("twist_under_load", **{"rod.elements": 80, "loading.force_multiple": None,
+                                        "loading.extension": 1.0, "loading.twist_density": 0.21})
+    assert r.history["writhe"][-1] > 0.5
+    assert sum(s["probes_left"] for s in r.diagnostics["stages"]) >= 1

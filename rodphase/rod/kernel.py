@@ -42,7 +42,8 @@ I_CHECK_EVERY = 14
 I_STOP_AT_EQUILIBRIUM = 15
 I_START_BODY = 16  # 1: a rigid rod beyond node 0, along -axis, takes part in contact
 I_END_BODY = 17  # 1: a rigid rod beyond node n, along +axis (the loading rod), ditto
-N_INTS = 18
+I_PROBE = 18  # 1: an equilibrium ends the hold only if it survives a perturbation (stable)
+N_INTS = 19
 
 # float settings
 F_DT = 0
@@ -66,7 +67,10 @@ F_SETTLE_WINDOW = 23  # s: window over which the mean shape is compared (0: resi
 F_SETTLE_DISTANCE = 24  # m: the mean shape settled if no surface point moved more than this
 F_NEAR_SKIN = 25  # m: gap below which a candidate pair enters the short (near) contact list
 F_BODY_RADIUS = 26  # m: radius of the end bodies (I_START_BODY, I_END_BODY)
-N_FLOATS = 27
+F_PROBE_SIZE = 27  # m: largest node displacement of the stability probe
+F_PROBE_RETURN = 28  # stable once back within this fraction of the probe size of the equilibrium
+F_PROBE_LEAVE = 29  # left the equilibrium once this many probe sizes away from it
+N_FLOATS = 30
 
 # control tables
 T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
@@ -117,7 +121,9 @@ D_KINETIC = 6
 D_SETTLED = 7  # 1 if the last equilibrium stop was by the settled mean shape, not the residual
 D_SETTLE_MOTION = 8  # m: last settle measure: motion of the window-mean shape or spread
 D_NEAR_REBUILDS = 9  # rebuilds of the near contact list
-N_INFO = 10
+D_PROBES = 10  # stability probes applied (perturbations of a candidate equilibrium)
+D_PROBES_LEFT = 11  # probes after which the rod left the candidate (it was unstable)
+N_INFO = 12
 
 
 @njit(cache=True, inline="always")
@@ -451,13 +457,16 @@ def _hold_velocities(v, ints, floats, displacement_rate):
 def advance(x, v, Q, w, t_start, n_steps,
             rest_length, rest_voronoi, node_mass, inertia, shear_stiffness, bend_stiffness,
             rest_curvature, rest_shear, rest_radius, contact_k, contact_c, local_mask,
-            ints, floats, start_position, end_position, start_frame, end_frame,
+            probe_shape, ints, floats, start_position, end_position, start_frame, end_frame,
             table_t, table_v, table_n,
             history, snap_x, snap_d1, info):
     """Advance the rod by up to n_steps steps of floats[F_DT] from time t_start, in place.
 
     history (H, N_HISTORY), snap_x (H, 3, n+1) and snap_d1 (H, 3, n) receive a row every
     ints[I_HISTORY_EVERY] steps and at the end; H must be ≥ n_steps // every + 2.
+    probe_shape (3, n+1), largest row norm 1 and zero on held components, is the direction of
+    the stability probe (ints[I_PROBE]): a candidate equilibrium of a hold is displaced by
+    floats[F_PROBE_SIZE] along it, and the hold ends only once the rod has come back to it.
     Returns (status, steps_taken, t_end, rows_written); info (N_INFO,) gets diagnostics.
     """
     n = rest_length.shape[0]
@@ -547,6 +556,22 @@ def advance(x, v, Q, w, t_start, n_steps,
     clamp = np.empty((3, 3))
     couple = np.empty(7)
     kinetic_before = 0.0
+    # Stability probe: a residual test cannot tell a stable equilibrium from an unstable one
+    # (a straight twisted rod above its onset is in equilibrium too). A candidate is displaced
+    # by probe_size along probe_shape; it is stable if the rod comes back to within
+    # probe_return·probe_size of it and passes the equilibrium test there, unstable if the rod
+    # moves probe_leave·probe_size away (the test then resumes and the next candidate is
+    # probed in turn). Undecided, the hold runs to its time limit: `not_converged`.
+    # Candidates in self-contact are accepted unprobed: damped dynamics from a generic state
+    # ends on an unstable equilibrium only where symmetry keeps the unstable mode unexcited
+    # (the straight rod, a flat loop) and no contact confines it; a coil or braid in
+    # contact creeps by more than a probe's return distance while its shape is settled.
+    probe_on = ints[I_PROBE] != 0 and stop_at_equilibrium
+    probe_size = floats[F_PROBE_SIZE]
+    probe_running = False
+    probe_reference = x.copy()
+    probes = 0
+    probes_left = 0
 
     info[D_SETTLED] = 0.0
     t = t_start
@@ -875,8 +900,42 @@ def advance(x, v, Q, w, t_start, n_steps,
                     window_count = 0
                     window_start = t
 
-        if (check and stop_at_equilibrium and t >= equilibrium_after
-                and (settled or (residual < tolerance and kinetic < tolerance * tolerance))):
+        accept = False
+        if check and stop_at_equilibrium and t >= equilibrium_after:
+            at_rest = settled or (residual < tolerance and kinetic < tolerance * tolerance)
+            accept = at_rest
+            if probe_on:
+                accept = False
+                if probe_running:
+                    away = 0.0
+                    for i in range(n + 1):
+                        d0 = x[0, i] - probe_reference[0, i]
+                        d1 = x[1, i] - probe_reference[1, i]
+                        d2 = x[2, i] - probe_reference[2, i]
+                        away = max(away, d0 * d0 + d1 * d1 + d2 * d2)
+                    away = np.sqrt(away)
+                    if away > floats[F_PROBE_LEAVE] * probe_size:
+                        probe_running = False
+                        probes_left += 1
+                    elif at_rest and away < floats[F_PROBE_RETURN] * probe_size:
+                        accept = True
+                elif at_rest and touching > 0:
+                    accept = True  # held by contact: see the note on the probe above
+                elif at_rest:
+                    probe_reference[:, :] = x
+                    for c in range(3):
+                        for i in range(n + 1):
+                            x[c, i] += probe_size * probe_shape[c, i]
+                    probe_running = True
+                    probes += 1
+                    # the shape test starts afresh: the windows before the probe say nothing
+                    window_sum[:, :] = 0.0
+                    window_squares[:, :] = 0.0
+                    window_count = 0
+                    window_start = t
+                    have_mean = False
+                    settled = False
+        if accept:
             status = S_EQUILIBRIUM
             info[D_SETTLED] = 0.0 if residual < tolerance and kinetic < tolerance * tolerance else 1.0
             if not last:
@@ -897,4 +956,6 @@ def advance(x, v, Q, w, t_start, n_steps,
     info[D_KINETIC] = kinetic
     info[D_SETTLE_MOTION] = settle_motion
     info[D_NEAR_REBUILDS] = near_rebuilds
+    info[D_PROBES] = probes
+    info[D_PROBES_LEFT] = probes_left
     return status, steps, t, rows

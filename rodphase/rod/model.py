@@ -171,6 +171,14 @@ class Solver:
     settle_window: float = 0.0
     settle_scale: float | None = None  # m; None = the rod's rest length (as the kinetic test)
     speed_limit: float | None = None  # m/s; None = the axial wave speed
+    # Stability probe of a hold's equilibrium (see kernel.advance): displace the candidate by
+    # probe_size rest radii (seeded smooth lateral shape, probe_seed) and accept it only if
+    # the rod returns within probe_return of that size; probe_leave sizes away means it left.
+    stability_probe: bool = False
+    probe_size: float = 0.1
+    probe_return: float = 0.1
+    probe_leave: float = 3.0
+    probe_seed: int = 0
 
 
 @dataclass(frozen=True)

@@ -119,6 +119,7 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     ints[k.I_STOP_AT_EQUILIBRIUM] = until_equilibrium
     ints[k.I_START_BODY] = ends.start_body
     ints[k.I_END_BODY] = ends.end_body
+    ints[k.I_PROBE] = solver.stability_probe
     floats = np.zeros(k.N_FLOATS)
     floats[k.F_DT] = dt
     floats[k.F_DAMPING] = solver.damping
@@ -130,6 +131,9 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     floats[k.F_SKIN] = contact.skin * rod.radius
     floats[k.F_NEAR_SKIN] = contact.near_skin * rod.radius
     floats[k.F_BODY_RADIUS] = ends.body_radius * rod.radius
+    floats[k.F_PROBE_SIZE] = solver.probe_size * rod.radius
+    floats[k.F_PROBE_RETURN] = solver.probe_return
+    floats[k.F_PROBE_LEAVE] = solver.probe_leave
     floats[k.F_PENETRATION_LIMIT] = contact.penetration_limit
     c_axial = math.sqrt(rod.youngs_modulus / rod.density)
     floats[k.F_SPEED_LIMIT] = solver.speed_limit if solver.speed_limit is not None else c_axial
@@ -223,6 +227,27 @@ def force_scale(problem: Problem) -> float:
     controls = [problem.controls] + [s.controls for s in problem.stages if s.controls is not None]
     load = max(max(abs(v) for v in c.end_force[1]) for c in controls)
     return max(load, problem.rod.buckling_force)
+
+
+def probe_shape(n: int, axis, seed: int) -> np.ndarray:
+    """(3, n+1) direction of the stability probe: lateral to `axis`, the first three sine
+    modes along the rod with seeded normal coefficients in both lateral directions, zero at
+    both end nodes (held or not), largest node displacement 1. Low modes are where a rod under
+    tension loses stability first (Euler, Greenhill); a generic combination of them has a
+    component on whichever one goes unstable."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    rng = np.random.default_rng(seed)
+    coefficients = rng.standard_normal((3, 2))
+    s = np.linspace(0.0, 1.0, n + 1)
+    shape = np.zeros((n + 1, 3))
+    for m, (a, b) in enumerate(coefficients, start=1):
+        shape += np.sin(m * np.pi * s)[:, None] * (a * e1 + b * e2)[None, :]
+    shape /= np.linalg.norm(shape, axis=1).max()
+    return np.ascontiguousarray(shape.T)
 
 
 def _local_mask(n: int, segment: tuple[int, int]) -> np.ndarray:
@@ -323,7 +348,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
             arrays["rest_length"], arrays["rest_voronoi"], arrays["node_mass"], arrays["inertia"],
             arrays["shear_stiffness"], arrays["bend_stiffness"], arrays["rest_curvature"],
             arrays["rest_shear"], arrays["rest_radius"], arrays["contact_k"], arrays["contact_c"],
-            _local_mask(n, controls.segment), ints, floats, start_position, end_position,
+            _local_mask(n, controls.segment), probe_shape(n, ends.axis, problem.solver.probe_seed + index),
+            ints, floats, start_position, end_position,
             start_frame, end_frame, table_t, table_v, table_n, hist, snap_x, snap_d, info)
         state.time = t_end
         steps_total += steps
@@ -344,6 +370,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                              "equilibrium": code == k.S_EQUILIBRIUM,
                              "settled": bool(code == k.S_EQUILIBRIUM and info[k.D_SETTLED]),
                              "residual": float(info[k.D_RESIDUAL]),
+                             "probes": int(info[k.D_PROBES]),
+                             "probes_left": int(info[k.D_PROBES_LEFT]),
                              "settle_motion": float(info[k.D_SETTLE_MOTION])})
         if code in _GUARDS:
             status = "unstable"
