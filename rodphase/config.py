@@ -154,6 +154,12 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "youngs_modulus": (number(0, strict_min=True, unit="Pa"), 1.0e6),
         "shear_modulus": (auto_or(number(0, strict_min=True, unit="Pa")), "auto"),
         "incompressible": (boolean, True),
+        # given directly instead of from E, G and the radius (null: derived), for rods that
+        # are not solid isotropic cylinders; the radius then sets only mass, inertia, contact
+        "bend_stiffness": (number(0, strict_min=True, unit="N m^2 (B = EI)", nullable=True), None),
+        "twist_stiffness": (number(0, strict_min=True, unit="N m^2 (C = GJ)", nullable=True), None),
+        "shear_stiffness": (number(0, strict_min=True, unit="N (4GA/3)", nullable=True), None),
+        "axial_stiffness": (number(0, strict_min=True, unit="N (EA)", nullable=True), None),
     },
     "ends": {
         "start": (choice("clamped", "free"), "clamped"),
@@ -222,6 +228,10 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "stiffen": {
         "factor": (number(1, 100, strict_min=True, unit="final E / initial E"), 3.0),
         "time": (number(0, strict_min=True, unit="s"), 20.0),
+    },
+    "compress": {  # helical_buckling: the ends approach while both clamps turn
+        "slack": (number(0, unit="m the ends approach"), 3.0),
+        "time": (number(0, strict_min=True, unit="s over which slack and turns are put in"), 500.0),
     },
     "muscle": {
         "helix_radius": (number(0, strict_min=True, unit="m"), 0.03),

@@ -25,7 +25,9 @@ def rod_from(cfg) -> Rod:
     r, m = cfg.rod, cfg.material
     return Rod(length=r.length, radius=r.radius, elements=r.elements, density=r.density,
                youngs_modulus=m.youngs_modulus, shear_modulus=C.shear_modulus(cfg),
-               incompressible=m.incompressible)
+               incompressible=m.incompressible, bend_stiffness=m.bend_stiffness,
+               twist_stiffness_given=m.twist_stiffness, shear_stiffness_given=m.shear_stiffness,
+               axial_stiffness_given=m.axial_stiffness)
 
 
 def contact_from(cfg) -> Contact:
@@ -236,7 +238,33 @@ def active_agent(cfg) -> Problem:
     return _problem(cfg, rod, straight_state(rod), stages, rest_curvature=imperfection(cfg, rod))
 
 
+def helical_buckling(cfg) -> Problem:
+    """The helical buckling benchmark (van der Heijden et al. 2003; PyElastica's
+    HelicalBucklingCase): a rod clamped at both ends whose ends approach by `compress.slack`
+    while each clamp turns by half of `loading.twist_turns` in opposite senses, over
+    `compress.time`; then held. It buckles into a localised helix whose twist and writhe
+    have closed forms (Tw + Wr = the turns put in)."""
+    rod = rod_from(cfg)
+    turns = C.twist_turns(cfg)
+    t = cfg.compress.time
+    slack = cfg.compress.slack
+    ends = Ends(start_held=(True,) * 3, start_frame_held=True, end_held=(True,) * 3,
+                end_frame_held=True, start_body=False, end_body=False)
+    twist = Controls(start_rotation=ramp(0, t, 0, -0.5 * TURN * turns),
+                     end_rotation=ramp(0, t, 0, 0.5 * TURN * turns),
+                     end_displacement=ramp(0, t, 0, -slack))
+    # a stage with its own clock holds the end where the stage finds it (displacement 0
+    # from there); rotations are absolute
+    held = Controls(start_rotation=constant(-0.5 * TURN * turns),
+                    end_rotation=constant(0.5 * TURN * turns))
+    stages = [Stage(t, label="compress and twist", controls=twist),
+              hold_stage(cfg, held, "hold")]
+    return _problem(cfg, rod, straight_state(rod), stages, ends=ends,
+                    rest_curvature=imperfection(cfg, rod))
+
+
 SCENES: dict[str, Callable] = {
+    "helical_buckling": helical_buckling,
     "twist_under_load": twist_under_load,
     "solenoid_loss": solenoid_loss,
     "stiffening": stiffening,

@@ -44,6 +44,14 @@ class Rod:
     shear_modulus: float = 2.0e6 / 3.0  # Pa; the paper's G = 2E/3
     rest_curvature: tuple[float, float, float] = (0.0, 0.0, 0.0)
     incompressible: bool = True
+    # Stiffnesses given directly (None: from E, G and the radius), for rods that are not
+    # solid isotropic cylinders (e.g. the helical buckling benchmark's B, C, S): bending
+    # B = EI [N m²], twist C = GJ [N m²], shear 4GA/3 [N], axial EA [N]. The radius then only
+    # sets mass, inertia and contact.
+    bend_stiffness: float | None = None
+    twist_stiffness_given: float | None = None
+    shear_stiffness_given: float | None = None
+    axial_stiffness_given: float | None = None
 
     @property
     def area(self) -> float:
@@ -55,11 +63,35 @@ class Rod:
 
     @property
     def bending_stiffness(self) -> float:
+        if self.bend_stiffness is not None:
+            return self.bend_stiffness
         return self.youngs_modulus * self.second_moment
 
     @property
     def twist_stiffness(self) -> float:
+        if self.twist_stiffness_given is not None:
+            return self.twist_stiffness_given
         return self.shear_modulus * 2.0 * self.second_moment
+
+    @property
+    def shear_stiffness(self) -> float:
+        if self.shear_stiffness_given is not None:
+            return self.shear_stiffness_given
+        return 4.0 * self.shear_modulus * self.area / 3.0
+
+    @property
+    def axial_stiffness(self) -> float:
+        if self.axial_stiffness_given is not None:
+            return self.axial_stiffness_given
+        return self.youngs_modulus * self.area
+
+    @property
+    def wave_moduli(self) -> tuple[float, float]:
+        """(E, G) that the axial and shear waves see: EA/A and (3/4)·S/A with given stiffnesses."""
+        e = self.youngs_modulus if self.axial_stiffness_given is None else self.axial_stiffness / self.area
+        g = (self.shear_modulus if self.shear_stiffness_given is None
+             else 0.75 * self.shear_stiffness / self.area)
+        return e, g
 
     @property
     def buckling_force(self) -> float:
@@ -256,8 +288,8 @@ def straight_state(rod: Rod, axis=(0.0, 0.0, 1.0), twist_turns: float = 0.0,
 
 def wave_speeds(rod: Rod, stiffness_factor: float = 1.0) -> tuple[float, float]:
     """(axial, shear) wave speeds [m/s]."""
-    e = rod.youngs_modulus * stiffness_factor
-    g = rod.shear_modulus * stiffness_factor
+    e, g = rod.wave_moduli
+    e, g = e * stiffness_factor, g * stiffness_factor
     return math.sqrt(e / rod.density), math.sqrt(max(4.0 * g / 3.0, g) / rod.density)
 
 
@@ -278,7 +310,7 @@ def stable_time_step(rod: Rod, contact: Contact, stiffness_factor: float = 1.0,
     c = max(c_axial, c_shear)
     l0 = rod.element_length
     a = rod.radius * min(radius_factor, 1.0)
-    g = rod.shear_modulus * stiffness_factor
+    g = rod.wave_moduli[1] * stiffness_factor
     omega2 = (2.0 * c / l0) ** 2 + 16.0 * g / (3.0 * rod.density * a * a)
     if contact.enabled:
         partners = 2.0 + 4.0 * rod.radius * max(radius_factor, 1.0) / l0

@@ -76,11 +76,11 @@ def _rod_arrays(problem: Problem):
     inertia[0] = inertia[1] = rod.density * i1 * l0
     inertia[2] = rod.density * 2 * i1 * l0
     shear = np.empty((3, n))
-    shear[0] = shear[1] = 4.0 * rod.shear_modulus * area / 3.0
-    shear[2] = rod.youngs_modulus * area
+    shear[0] = shear[1] = rod.shear_stiffness
+    shear[2] = rod.axial_stiffness
     bend = np.empty((3, n - 1))
-    bend[0] = bend[1] = rod.youngs_modulus * i1
-    bend[2] = rod.shear_modulus * 2 * i1
+    bend[0] = bend[1] = rod.bending_stiffness
+    bend[2] = rod.twist_stiffness
     curvature = np.tile(np.asarray(rod.rest_curvature, float)[:, None], (1, n - 1))
     if problem.rest_curvature is not None:
         extra = np.asarray(problem.rest_curvature, float)
@@ -135,7 +135,7 @@ def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
     floats[k.F_PROBE_RETURN] = solver.probe_return
     floats[k.F_PROBE_LEAVE] = solver.probe_leave
     floats[k.F_PENETRATION_LIMIT] = contact.penetration_limit
-    c_axial = math.sqrt(rod.youngs_modulus / rod.density)
+    c_axial = math.sqrt(rod.wave_moduli[0] / rod.density)
     floats[k.F_SPEED_LIMIT] = solver.speed_limit if solver.speed_limit is not None else c_axial
     floats[k.F_TOLERANCE] = solver.tolerance
     floats[k.F_FORCE_SCALE] = force_scale(problem)
@@ -217,7 +217,7 @@ def link_escapes(history: dict) -> np.ndarray:
 
 def rotational_damping_auto(rod) -> float:
     """40·√(G/ρ)/L0 [1/s]: see Solver.rotational_damping."""
-    return 40.0 * math.sqrt(rod.shear_modulus / rod.density) / rod.length
+    return 40.0 * math.sqrt(rod.wave_moduli[1] / rod.density) / rod.length
 
 
 def force_scale(problem: Problem) -> float:
