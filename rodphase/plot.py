@@ -183,7 +183,8 @@ def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: floa
     if not all(v and np.isfinite(v) for v in (rest_radius, rest_length)):
         raise ValueError("topology_curves needs rest_radius and rest_length (m) to compute "
                          "Φa; pass them for a plain history dict")
-    phi_a = np.asarray(history["end_rotation"]) * rest_radius / rest_length
+    turned = np.asarray(history["end_rotation"]) - np.asarray(history.get("start_rotation", 0.0))
+    phi_a = turned * rest_radius / rest_length
 
     with matplotlib.rc_context(STYLE):
         fig = _figure(figsize=(5.0, 3.6))
@@ -193,6 +194,17 @@ def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: floa
         ax.plot(phi_a, history["writhe"], color=VERMILLION, lw=1.6, ls="-.",
                 label="writhe $Wr$")
         ax.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+        if "link_escapes" in history:
+            # link escape events (a loop slipping over an end): where the counter steps,
+            # with the link lost or gained beyond what the clamps put in
+            steps = np.flatnonzero(np.diff(history["link_escapes"], prepend=0.0) > 0)
+            surplus = np.asarray(history["link"]) - turned / (2 * np.pi)
+            for k, row in enumerate(steps):
+                jump = surplus[row] - surplus[max(row - 1, 0)]
+                ax.axvline(phi_a[row], color="0.5", lw=0.8, ls=":", zorder=0,
+                           label="link escape" if k == 0 else None)
+                ax.annotate(f"$\\Delta Lk$ = {jump:+.1f}", (phi_a[row], history["link"][row]),
+                            xytext=(3, 6), textcoords="offset points", fontsize=7, color="0.3")
         ax.set_xlabel(TWIST_DENSITY_LABEL)
         ax.set_ylabel("turns")
         ax.legend(frameon=False)

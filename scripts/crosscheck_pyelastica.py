@@ -240,6 +240,262 @@ def reduce_reference(case: str, raw: Path, out: Path, sample: float = 0.5) -> No
           f"end rotation {rot[-1] / (2 * np.pi):.3f} turns")
 
 
+# ------------------------------------------------------------------ rodphase
+
+# rodphase runs along +z; PyElastica's examples along +y. The cyclic relabelling
+# (x, y, z)_rodphase = (z, x, y)_PyElastica is a proper rotation that takes PyElastica's
+# initial frame (d1 = z, d2 = x, d3 = y) to rodphase's straight_state (d1 = x, d2 = y, d3 = z).
+def to_pyelastica(p):
+    """(..., 3) rodphase coordinates -> PyElastica's."""
+    p = np.asarray(p)
+    return p[..., [1, 2, 0]]
+
+
+def contact_mapping(case: str) -> dict:
+    """PyElastica's RodSelfContact(k, nu) in rodphase's units.
+
+    PyElastica (elastica/_contact_functions.py, _calculate_contact_forces_self_rod): for each
+    pair of elements (i, j) with i - j >= skip = 1 + ceil(0.8 pi a / l) whose capsules
+    overlap by gamma > 0, a force k*gamma + nu*(dv . n) along the line of closest approach,
+    half on each node of each element: k [N/m] and nu [N s/m] are per PAIR, not per length.
+    rodphase (rod/simulate.py _rod_arrays, rod/contact.py): pair spring k = stiffness*E*l0,
+    dashpot c = 2*damping_ratio*sqrt(k*m_e), m_e = rho*A*l0; pairs with j > i + ceil(exclusion*a/l0).
+    So stiffness = k/(E l0), damping_ratio = nu/(2 sqrt(k m_e)), exclusion = 0.8 pi.
+    """
+    c = settings(case)
+    l0 = BASE_LENGTH / c["n_elem"]
+    m_e = c["density"] * math.pi * BASE_RADIUS**2 * l0
+    return {"stiffness": CONTACT_K / (E * l0),
+            "damping_ratio": CONTACT_NU / (2.0 * math.sqrt(CONTACT_K * m_e)),
+            "exclusion": 0.8 * math.pi}
+
+
+def rotational_damping_equivalent(case: str) -> float:
+    """PyElastica's deprecated damping_constant protocol scales omega by
+    exp(-nu dt m_e / J) per step: a rate nu*A/I = 4 nu / a^2 about d1, d2 and half of it
+    about d3 (J3 = 2 J1), which is exactly rodphase's solver.rotational_damping convention."""
+    return 4.0 * settings(case)["damping_constant"] / BASE_RADIUS**2
+
+
+def rodphase_sets(case: str, contact: str, dt: str, rotation_damping: str) -> list[tuple[str, object]]:
+    """The --set keys (SCENE_SCHEMA) of twist_under_load that carry the example's settings."""
+    c = settings(case)
+    sets = [("rod.elements", c["n_elem"]), ("rod.density", c["density"]),
+            ("rod.imperfection", 0.0), ("material.youngs_modulus", E),
+            ("material.shear_modulus", c["shear_modulus"]),
+            ("loading.force_multiple", None), ("loading.twist_density", None),
+            ("loading.force", c["force"]), ("loading.force_ramp_time", max(c["time_start_twist"] - 1, 1.0)),
+            ("loading.twist_turns", float(c["turns"])), ("loading.twist_rate", c["rate_turns_per_s"]),
+            ("physics.self_contact", True), ("physics.friction", 0.0),
+            ("ends.start_body", "none"), ("ends.end_body", "none"),
+            ("solver.damping", c["damping_constant"]), ("solver.quadratic_drag", 0.0),
+            ("solver.hold_until", "time"), ("solver.hold_max_time", c["time_relax"]),
+            ("output.history_interval", 0.1)]
+    if contact == "example":
+        m = contact_mapping(case)
+        sets += [("contact.stiffness", m["stiffness"]), ("contact.damping_ratio", m["damping_ratio"]),
+                 ("contact.exclusion", m["exclusion"])]
+    elif contact != "rodphase":
+        for item in contact.split(","):  # e.g. "stiffness=15,damping_ratio=0.6"
+            key, value = item.split("=")
+            sets.append((f"contact.{key}", float(value)))
+    if dt == "example":
+        sets.append(("solver.dt", c["dt"]))
+    elif dt != "auto":
+        sets.append(("solver.dt", float(dt)))
+    if rotation_damping == "example":
+        sets.append(("solver.rotational_damping", rotational_damping_equivalent(case)))
+    elif rotation_damping != "auto":
+        sets.append(("solver.rotational_damping", float(rotation_damping)))
+    return sets
+
+
+def reference_rotation(case: str):
+    """(times, rad) of the end rotation PyElastica actually applied, from the raw frames."""
+    raw = np.load(Path(f"/tmp/crosscheck_raw_{case}.npz"))
+    t = raw["time"]
+    return t, end_rotation(t, raw["d1"][:, -1], raw["omega_end"])
+
+
+def build_problem(case: str, sets, twist: str, kick: str):
+    import dataclasses
+
+    from rodphase import config as C
+    from rodphase import scenes
+    from rodphase.rod import Controls, Ends, Stage, constant, ramp
+
+    cfg = C.load_scene("twist_under_load", sets, registered=scenes.SCENES)
+    problem = scenes.twist_under_load(cfg)
+    problem.rest_curvature = None  # PyElastica's rod is perfectly straight
+    c = settings(case)
+    n = c["n_elem"]
+    turn = 2 * math.pi
+    t0, tt, force = c["time_start_twist"], c["time_twist"], c["force"]
+    # the twist-phase kick: velocity_collection[2, n//2] -= 1e-4 every step is a point force
+    # m_node*1e-4/dt (0.04 N) along -z of PyElastica (-x here); rodphase has no point force,
+    # so a uniform load with the same projection on the first mode, (pi/2)*F/M
+    point = c["density"] * math.pi * BASE_RADIUS**2 * (BASE_LENGTH / n) * KICK / c["dt"]
+    g = (-(math.pi / 2) * point / MASS, 0.0, 0.0) if kick == "load" else (0.0, 0.0, 0.0)
+    if c["initial_kick"] and kick != "none":
+        problem.state.v[0, n // 2] -= KICK
+    if twist == "as-run":
+        tr, rot = reference_rotation(case)
+        keep = (tr >= t0) & (tr <= t0 + tt + 1e-9)
+        table = (tuple(tr[keep] - t0), tuple(rot[keep]))
+        final = float(rot[tr <= t0 + tt + 1e-9][-1])
+        # after the twist PyElastica sets the end frame to R(-2 pi turns) Q_end: the
+        # nearest whole turn, reached in one step
+        final_turns = round(final / turn)
+        final = turn * final_turns
+    else:
+        table = ramp(0.0, tt, 0.0, turn * c["turns"])
+        final = turn * c["turns"]
+    base = dict(start_held=(True,) * 3, start_frame_held=True, axis=(0.0, 0.0, 1.0),
+                start_body=False, end_body=False)
+    free = Ends(end_held=(False,) * 3, end_frame_held=False, **base)
+    sliding = Ends(end_held=(True, True, False), end_frame_held=True, **base)
+    clamped = Ends(end_held=(True, True, True), end_frame_held=True, **base)
+    stages = []
+    if t0 > 0:
+        ramp_time = t0 - 1
+        stages += [Stage(ramp_time, label="load", ends=free,
+                         controls=Controls(end_force=ramp(0, ramp_time, 0, force))),
+                   Stage(1.0, label="hold load", ends=free, controls=Controls(end_force=constant(force)))]
+    stages += [Stage(tt, label="twist", ends=sliding,
+                     controls=Controls(end_force=constant(force), end_rotation=table, gravity=g)),
+               Stage(c["time_relax"], label="relax", ends=clamped,
+                     controls=Controls(end_force=constant(force), end_rotation=constant(final)))]
+    problem.stages = tuple(stages)
+    problem.ends = sliding
+    return problem
+
+
+def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
+                 out: Path) -> dict:
+    from rodphase import classify
+    from rodphase.rod import simulate
+    from rodphase.topology import topology_history
+
+    from _common import machine
+
+    sets = rodphase_sets(case, contact, dt, rotation_damping)
+    problem = build_problem(case, sets, twist, kick)
+    cpu0 = time.process_time()
+    result = simulate(problem, topology=True)
+    cpu = time.process_time() - cpu0
+    h = result.history
+    X = result.snapshot_positions
+    D = result.snapshot_d1
+    # the reference's estimator (nodes + d1 of the elements, no clamp half-elements)
+    lk, tw, wr = topology_history(X, D) if len(X) else (np.zeros(0),) * 3
+    al = classify.alignment(result.positions, BASE_RADIUS, rest_length=BASE_LENGTH)
+    d = result.diagnostics
+    info = {"case": case, "sets": [[k, v] for k, v in sets], "twist": twist, "kick": kick,
+            "status": result.status, "message": result.message, "cpu_time": cpu,
+            "dt": d["dt"], "dt_bound": d["dt_bound"], "steps": d["steps"],
+            "us_per_step": d["us_per_step"], "max_pairs": d.get("max_pairs"),
+            "max_penetration": d.get("max_penetration"), "guard": d.get("guard"),
+            "final_time": d.get("final_time"), "notes": d.get("notes"),
+            "alignment": al, "phase": classify.phase(al), "machine": machine()}
+    np.savez_compressed(
+        out, time=h["time"], end_rotation=h["end_rotation"], link=lk, twist=tw, writhe=wr,
+        link_rodphase=h.get("link", np.zeros(0)), twist_rodphase=h.get("twist", np.zeros(0)),
+        writhe_rodphase=h.get("writhe", np.zeros(0)), contacts=h["contacts"],
+        penetration=h["penetration"], kinetic=h["kinetic_energy"],
+        end_position=to_pyelastica(X[:, -1]) if len(X) else np.zeros((0, 3)),
+        final_positions=to_pyelastica(result.positions),
+        final_d1=to_pyelastica(result.directors[:, 0]), info=json.dumps(info, default=str))
+    print(f"rodphase {case}: {result.status} ({result.message}); dt={d['dt']:.3g} "
+          f"(bound {d['dt_bound']:.3g}), {d['steps']} steps, {d['us_per_step']:.1f} us/step, "
+          f"cpu {cpu:.0f} s; max pairs {d.get('max_pairs')}, max penetration "
+          f"{d.get('max_penetration', 0):.3f}; final Lk={lk[-1] if len(lk) else np.nan:.3f} "
+          f"Tw={tw[-1] if len(tw) else np.nan:.3f} Wr={wr[-1] if len(wr) else np.nan:.3f}; "
+          f"alignment {al:.2f} ({classify.phase(al)}) -> {out}", flush=True)
+    return info
+
+
+# ------------------------------------------------------------------ comparison
+
+
+def _at(t, y, when):
+    return float(np.interp(when, t, y)) if len(t) and t[0] <= when <= t[-1] + 1e-9 else math.nan
+
+
+def onset(t, wr, threshold=0.5):
+    above = np.flatnonzero(np.abs(wr) > threshold)
+    return float(t[above[0]]) if len(above) else math.nan
+
+
+def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
+    from rodphase import classify
+
+    ref = np.load(ref_path)
+    rp = np.load(rp_path)
+    ri, pi = json.loads(str(ref["info"])), json.loads(str(rp["info"]))
+    c = settings(case)
+    t_end = min(ref["time"][-1], rp["time"][-1])
+    t0, tt = c["time_start_twist"], c["time_twist"]
+    times = sorted({t0 + f * tt for f in (0.25, 0.5, 0.75, 1.0)} | {t0 + tt + 10.0, t0 + tt + 25.0, t_end})
+    times = [t for t in times if t <= t_end + 1e-9]
+    lines = [f"### {case}: PyElastica 1.0 (reference) vs rodphase", "",
+             f"rodphase: {pi['status']}, twist {pi['twist']}, kick {pi['kick']}, dt = {pi['dt']:.3g} s; "
+             f"reference: {'finished' if ri.get('finished') else 'NOT finished'}", "",
+             "| t [s] | end rot. [turns] ref / rp | Lk ref / rp | Tw ref / rp | Wr ref / rp | end axial [m] ref / rp |",
+             "|---|---|---|---|---|---|"]
+    ax = 1  # PyElastica's y
+    for t in times:
+        row = [f"{t:.1f}"]
+        for key, scale in (("end_rotation", 2 * np.pi), ("link", 1), ("twist", 1), ("writhe", 1)):
+            a = _at(ref["time"], ref[key] / scale, t)
+            b = _at(rp["time"], rp[key] / scale, t)
+            row.append(f"{a:.3f} / {b:.3f}")
+        a = _at(ref["time"], ref["end_position"][:, ax], t)
+        b = _at(rp["time"][: len(rp["end_position"])], rp["end_position"][:, ax], t)
+        row.append(f"{a:.4f} / {b:.4f}")
+        lines.append("| " + " | ".join(row) + " |")
+    on_r, on_p = onset(ref["time"], ref["writhe"]), onset(rp["time"], rp["writhe"])
+    al_r = classify.alignment(ref["final_positions"], BASE_RADIUS, rest_length=BASE_LENGTH)
+    al_p = classify.alignment(rp["final_positions"], BASE_RADIUS, rest_length=BASE_LENGTH)
+    lines += ["",
+              f"- buckling onset (first |Wr| > 0.5 turns): reference {on_r:.2f} s, rodphase {on_p:.2f} s",
+              f"- final alignment / phase: reference {al_r:.3f} ({classify.phase(al_r)}), "
+              f"rodphase {al_p:.3f} ({classify.phase(al_p)})",
+              f"- CPU time: reference {ri.get('cpu_time', math.nan):.0f} s "
+              f"({ri['settings']['total_steps'] if 'total_steps' in ri['settings'] else ''} steps, "
+              f"PyElastica 1.0), rodphase {pi['cpu_time']:.1f} s ({pi['steps']} steps, "
+              f"{pi['us_per_step']:.1f} us/step); machine: {ri['machine']['cpu']}"]
+    text = "\n".join(lines)
+    print(text)
+    if png is not None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+        for key, col in (("link", "C0"), ("twist", "C1"), ("writhe", "C2")):
+            axes[0].plot(ref["time"], ref[key], color=col, lw=2, alpha=0.5, label=f"{key[:2].title()} PyElastica")
+            axes[0].plot(rp["time"], rp[key], color=col, lw=1, ls="--", label=f"{key[:2].title()} rodphase")
+        axes[0].set_ylabel("turns")
+        axes[0].legend(ncol=3, fontsize=7)
+        axes[1].plot(ref["time"], ref["end_position"][:, ax], lw=2, alpha=0.5, label="PyElastica")
+        axes[1].plot(rp["time"][: len(rp["end_position"])], rp["end_position"][:, ax], lw=1, ls="--",
+                     label="rodphase")
+        axes[1].set_ylabel("free end, axial position [m]")
+        axes[1].set_xlabel("time [s]")
+        axes[1].legend(fontsize=7)
+        for a in axes:
+            a.axvline(t0 + tt, color="0.7", lw=0.8)
+            if t0 > 0:
+                a.axvline(t0, color="0.7", lw=0.8)
+        fig.suptitle(f"{case}: PyElastica 1.0 example vs rodphase ({pi['twist']} twist)")
+        fig.tight_layout()
+        png.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(png, dpi=110)
+        print(f"wrote {png}")
+    return text
+
+
 # ------------------------------------------------------------------ command line
 
 
@@ -256,7 +512,32 @@ def main(argv=None) -> int:
     b.add_argument("case", choices=sorted(CASES))
     b.add_argument("--raw", type=Path, default=None)
     b.add_argument("-o", "--out", type=Path, default=None)
+    r = sub.add_parser("rodphase", help="run the case's settings in rodphase")
+    r.add_argument("case", choices=sorted(CASES))
+    r.add_argument("--contact", default="example",
+                   help="example (k, nu mapped), rodphase (its defaults), or key=value,... of contact.*")
+    r.add_argument("--dt", default="example", help="example (PyElastica's), auto, or seconds")
+    r.add_argument("--twist", choices=("as-run", "nominal"), default="as-run",
+                   help="as-run: the end rotation PyElastica applied (needs the raw reference); "
+                        "nominal: turns at the nominal rate")
+    r.add_argument("--kick", choices=("load", "none"), default="load")
+    r.add_argument("--rotational-damping", default="example", help="example (4 nu/a^2), auto, or 1/s")
+    r.add_argument("-o", "--out", type=Path, default=None)
+    q = sub.add_parser("compare", help="table and figure: reference vs rodphase")
+    q.add_argument("case", choices=sorted(CASES))
+    q.add_argument("--rodphase", type=Path, default=None)
+    q.add_argument("--png", type=Path, default=None)
     args = p.parse_args(argv)
+    if args.cmd == "rodphase":
+        out = args.out or Path(f"/tmp/crosscheck_rodphase_{args.case}.npz")
+        run_rodphase(args.case, args.contact, args.dt, args.twist, args.kick,
+                     args.rotational_damping, out)
+        return 0
+    if args.cmd == "compare":
+        compare(args.case, DATA / f"crosscheck_{args.case}.npz",
+                args.rodphase or Path(f"/tmp/crosscheck_rodphase_{args.case}.npz"),
+                args.png or IMG / f"crosscheck_{args.case}.png")
+        return 0
 
     raw = args.raw or Path(f"/tmp/crosscheck_raw_{args.case}.npz")
     out = args.out or DATA / f"crosscheck_{args.case}.npz"

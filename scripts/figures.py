@@ -41,6 +41,7 @@ FIGURES: dict[str, list[tuple[str, str, list]]] = {
     "fig4c": [("homochiral", "muscle", [("muscle.chirality", "homochiral")]),
               ("heterochiral", "muscle", [("muscle.chirality", "heterochiral")])],
     "figS9": [("run", "active_agent", [])],
+    "figS3": [("run", "figS3_escape", [])],
 }
 DPI = 130  # documentation figures stay well under 300 kB
 TURN = 2 * math.pi
@@ -667,9 +668,31 @@ def figureS9(results: dict, out: Path, sets: list) -> dict:
     return m
 
 
+def figureS3(results: dict, out: Path, sets: list) -> dict:
+    """Link escape: Lk, Tw, Wr against Φa with each escape (time, ΔLk) marked."""
+    from rodphase import plot as P
+    from rodphase.rod.simulate import link_escapes
+
+    r = results["run"]
+    h = r.history
+    jumps = link_escapes(h)
+    rows = np.flatnonzero(jumps)
+    events = [{"time": float(h["time"][i]), "phi_a": float(phi_a(r)[i]),
+               "delta_link": float(jumps[i])} for i in rows]
+    P.topology_curves(r, out / "figS3.png", title="Fig S3: a loop slips over the sliding end")
+    shapes(out / "figS3_shape.png",
+           [snapshot_at(r, max(int(i) - 1, 0), f"before escape {k + 1}") for k, i in enumerate(rows[:3])]
+           + [snapshot_at(r, int(i), f"after escape {k + 1}") for k, i in enumerate(rows[:3])],
+           ncols=max(2, min(len(rows), 3)))
+    turns = (h["end_rotation"][-1] - h["start_rotation"][-1]) / TURN
+    return {"events": events, "turns_put_in": float(turns), "final_link": float(h["link"][-1]),
+            "link_lost": float(turns - h["link"][-1]), "escape_count": len(events)}
+
+
 DRAW = {"fig2a": lambda res, out, sets: figure2("fig2a", res, out, sets),
         "fig2b": lambda res, out, sets: figure2("fig2b", res, out, sets),
-        "fig4a": figure4a, "fig4b": figure4b, "fig4c": figure4c, "figS9": figureS9}
+        "fig4a": figure4a, "fig4b": figure4b, "fig4c": figure4c, "figS9": figureS9,
+        "figS3": figureS3}
 
 
 def main() -> int:

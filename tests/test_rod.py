@@ -174,15 +174,16 @@ def test_a_hold_keeps_a_stable_straight_rod_and_leaves_an_unstable_one():
     # The straight twisted rod is an equilibrium at any twist; the residual test alone ends
     # the hold there even above the onset (checked: probe off at 1.01 M_c ends `ok`, straight).
     # With the stability probe (a seeded lateral displacement of 0.1 radius = 1e-3 m; accepted
-    # only once the rod is back within a tenth of it) the rod is kept straight at 0.99 M_c
-    # (lateral < 1e-4 m plus the half step after the test) and leaves the straight state at
-    # 1.01 M_c (grows past 3 probe sizes, to centimetres: measured 7e-2 m).
+    # once its projection on the probe shape has decayed below a tenth) the rod is kept
+    # straight at 0.99 M_c (lateral < half the probe: measured 3e-4 m, the soft mode's rest
+    # within the residual tolerance) and leaves the straight state at 1.01 M_c (grows past 3
+    # probe sizes, to centimetres).
     unprobed, lateral, _ = _greenhill_hold(1.01, probe=False)
     assert unprobed.ok and lateral[-1] < 1e-6
     kept, lateral, stage = _greenhill_hold(0.99, probe=True)
     assert kept.ok, kept.message
     assert stage["probes"] >= 1 and stage["probes_left"] == 0
-    assert lateral[-1] < 1.2e-4
+    assert lateral[-1] < 5e-4
     left, lateral, stage = _greenhill_hold(1.01, probe=True)
     assert stage["probes_left"] >= 1
     assert lateral.max() > 1e-2, lateral.max()

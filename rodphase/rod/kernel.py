@@ -558,10 +558,11 @@ def advance(x, v, Q, w, t_start, n_steps,
     kinetic_before = 0.0
     # Stability probe: a residual test cannot tell a stable equilibrium from an unstable one
     # (a straight twisted rod above its onset is in equilibrium too). A candidate is displaced
-    # by probe_size along probe_shape; it is stable if the rod comes back to within
-    # probe_return·probe_size of it and passes the equilibrium test there, unstable if the rod
-    # moves probe_leave·probe_size away (the test then resumes and the next candidate is
-    # probed in turn). Undecided, the hold runs to its time limit: `not_converged`.
+    # by probe_size along probe_shape; it is stable if the displacement along that shape
+    # decays below probe_return of the probe and the rod passes the equilibrium test there,
+    # unstable if it grows beyond probe_leave probes (or any node moves that many probe sizes
+    # away): the test then resumes and the next candidate is probed in turn. Undecided, the
+    # hold runs to its time limit: `not_converged`.
     # Candidates in self-contact are accepted unprobed: damped dynamics from a generic state
     # ends on an unstable equilibrium only where symmetry keeps the unstable mode unexcited
     # (the straight rod, a flat loop) and no contact confines it; a coil or braid in
@@ -570,6 +571,10 @@ def advance(x, v, Q, w, t_start, n_steps,
     probe_size = floats[F_PROBE_SIZE]
     probe_running = False
     probe_reference = x.copy()
+    probe_norm2 = 0.0
+    for c in range(3):
+        for i in range(n + 1):
+            probe_norm2 += probe_shape[c, i] * probe_shape[c, i]
     probes = 0
     probes_left = 0
 
@@ -907,17 +912,24 @@ def advance(x, v, Q, w, t_start, n_steps,
             if probe_on:
                 accept = False
                 if probe_running:
+                    # how much of the probe is left (its projection on the probe shape; an
+                    # error of the candidate along other directions, e.g. the axial stretch
+                    # still settling to the tolerance, does not count) and how far the rod went
                     away = 0.0
+                    along = 0.0
                     for i in range(n + 1):
                         d0 = x[0, i] - probe_reference[0, i]
                         d1 = x[1, i] - probe_reference[1, i]
                         d2 = x[2, i] - probe_reference[2, i]
                         away = max(away, d0 * d0 + d1 * d1 + d2 * d2)
+                        along += d0 * probe_shape[0, i] + d1 * probe_shape[1, i] + d2 * probe_shape[2, i]
                     away = np.sqrt(away)
-                    if away > floats[F_PROBE_LEAVE] * probe_size:
+                    along = abs(along) / (probe_size * probe_norm2)
+                    leave = floats[F_PROBE_LEAVE]
+                    if away > leave * probe_size or along > leave:
                         probe_running = False
                         probes_left += 1
-                    elif at_rest and away < floats[F_PROBE_RETURN] * probe_size:
+                    elif at_rest and along < floats[F_PROBE_RETURN]:
                         accept = True
                 elif at_rest and touching > 0:
                     accept = True  # held by contact: see the note on the probe above
