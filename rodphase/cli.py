@@ -171,11 +171,11 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
 
 @main.command()
 @click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
-@click.option("--kind", type=click.Choice(["phase", "topology", "force", "response", "shape"]),
+@click.option("--kind", type=click.Choice(["phase", "topology", "force", "response", "shape", "hat"]),
               default="phase", show_default=True,
               help="phase: Φa vs L/L0 map; topology: Lk/Tw/Wr vs Φa; force: end force vs "
               "displacement; response: ΔU, ΔWr, ΔTw vs a modulus or radius ramp; shape: "
-              "final rod shapes.")
+              "final rod shapes; hat: extension and torque vs turns (scene hat_curve).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file.")
 @click.option("--run", "run_id", default=None, help="Run id for topology/force (default: first).")
 @click.option("--experiments", type=click.Path(exists=True, dir_okay=False),
@@ -211,6 +211,8 @@ def plot(store_file, kind, output, run_id, experiments, twist):
             result = store.read_run(rid)
             if kind == "topology":
                 P.topology_curves(result, output)
+            elif kind == "hat":
+                P.hat_curve(result, output)
             elif kind == "response":
                 P.control_response(result, output)
             else:

@@ -252,6 +252,50 @@ def force_displacement(history: dict | RunResult, path, *, stage: int | None = N
         return _save(fig, path)
 
 
+def hat_curve(result: RunResult, path, *, title: str | None = None) -> Path:
+    """The hat curve: extension L/L0 and end torque against the turns put in, at constant
+    force, one colour per protocol stage (up, down, back), with the buckling moments of the
+    straight rod (clamped Greenhill, and 2√(BF) of a long rod) for the stretched rod
+    (B/e², length e·L0 of the incompressible law)."""
+    from .theory import greenhill_clamped_moment, long_rod_buckling_moment
+
+    h, d = result.history, result.diagnostics
+    turns = (np.asarray(h["end_rotation"]) - np.asarray(h.get("start_rotation", 0.0))) / (2 * np.pi)
+    length, radius = d["rest_length"], d["rest_radius"]
+    extension = 1.0 + np.asarray(h["end_displacement"]) / length
+    force = float(np.max(h["applied_force"]))
+    bending = d["youngs_modulus"] * np.pi * radius**4 / 4.0
+    e = 1.0 / (1.0 - force / (d["youngs_modulus"] * np.pi * radius**2))
+    greenhill = greenhill_clamped_moment(force, e * length, bending / e**2)
+    long_rod = long_rod_buckling_moment(force, bending / e**2)
+    labels = [s["label"] for s in d.get("stages", [])]
+    stage = np.asarray(h["stage"])
+    colours = [BLACK, BLUE, VERMILLION, "0.5"]
+
+    with matplotlib.rc_context(STYLE):
+        fig = _figure(figsize=(5.0, 5.2))
+        top, bottom = fig.subplots(2, 1, sharex=True)
+        for k, label in enumerate(labels):
+            if label == "load":
+                continue
+            rows = stage == k
+            colour = colours[k % len(colours)]
+            top.plot(turns[rows], extension[rows], color=colour, lw=1.5, label=label)
+            bottom.plot(turns[rows], h["end_torque"][rows], color=colour, lw=1.5)
+        for sign in (1, -1):
+            bottom.axhline(sign * greenhill, color="0.4", lw=0.9, ls="--",
+                           label="clamped Greenhill $M_c$" if sign > 0 else None)
+            bottom.axhline(sign * long_rod, color="0.6", lw=0.9, ls=":",
+                           label=r"$2\sqrt{BF}$" if sign > 0 else None)
+        top.set_ylabel(r"extension $L/L_0$")
+        bottom.set_ylabel("end torque (N m)")
+        bottom.set_xlabel("turns put in")
+        top.legend(frameon=False, fontsize=8)
+        bottom.legend(frameon=False, fontsize=8)
+        top.set_title(title or f"hat curve at F = {force:.3g} N")
+        return _save(fig, path)
+
+
 # --- rod shapes ---------------------------------------------------------------------------
 
 def control_response(history: dict | RunResult, path, *, title: str | None = None) -> Path:

@@ -263,7 +263,23 @@ def helical_buckling(cfg) -> Problem:
                     rest_curvature=imperfection(cfg, rod))
 
 
+def hat_curve(cfg) -> Problem:
+    """The hat curve of single-molecule experiments: at a constant load, turn the end slowly
+    up to +twist_turns, down through zero to −twist_turns and back to zero, recording the
+    extension and the end torque; the rod buckles in both senses on the way."""
+    rod = rod_from(cfg)
+    force = C.load_force(cfg) or 0.0
+    turns = abs(C.twist_turns(cfg))
+    ramp_time = cfg.loading.force_ramp_time
+    stages = [Stage(ramp_time, label="load", controls=Controls(end_force=ramp(0, ramp_time, 0, force))),
+              twist_stages(cfg, force, 0.0, turns, label="up"),
+              twist_stages(cfg, force, turns, -turns, label="down"),
+              twist_stages(cfg, force, -turns, 0.0, label="back")]
+    return _problem(cfg, rod, straight_state(rod), stages, rest_curvature=imperfection(cfg, rod))
+
+
 SCENES: dict[str, Callable] = {
+    "hat_curve": hat_curve,
     "helical_buckling": helical_buckling,
     "twist_under_load": twist_under_load,
     "solenoid_loss": solenoid_loss,

@@ -119,3 +119,23 @@ def test_control_response_draws_a_radius_ramp(tmp_path):
     with pytest.raises(ValueError, match="neither"):
         control_response({"radius_factor": np.ones(3), "end_displacement": np.zeros(3)},
                          tmp_path / "x.png")
+
+
+def test_hat_curve_draws_each_branch_and_marks_escapes(tmp_path):
+    result = fake_result(rows=24)
+    h = result.history
+    turns = np.concatenate([np.zeros(6), np.linspace(0, 3, 6), np.linspace(3, -3, 6),
+                            np.linspace(-3, 0, 6)])
+    h["end_rotation"] = 2 * np.pi * turns
+    h["stage"] = np.repeat(np.arange(4), 6)
+    h["applied_force"] = np.full(24, 75.0)
+    h["end_torque"] = np.tanh(turns)
+    h["end_displacement"] = -0.01 * turns**2
+    result.diagnostics.update(youngs_modulus=1e6, stages=[{"label": s} for s in
+                                                         ("load", "up", "down", "back")])
+    assert is_png(plot.hat_curve(result, tmp_path / "hat.png"))
+    # the escape markers of the Lk/Tw/Wr plot
+    result = fake_result(rows=24)
+    result.history["link_escapes"] = (np.arange(24) >= 12).astype(float)
+    result.history["link"] = result.history["link"] - 2 * result.history["link_escapes"]
+    assert is_png(plot.topology_curves(result, tmp_path / "escape.png"))

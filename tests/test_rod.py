@@ -13,6 +13,7 @@ import pytest
 from scipy.optimize import brentq
 
 from rodphase import config as C
+from rodphase.theory import greenhill_clamped_moment
 from rodphase.rod import (
     Contact,
     Controls,
@@ -84,24 +85,7 @@ def test_cantilever_tip_deflection_converges_at_second_order():
     assert abs(e10) / abs(e20) > 3.0
 
 
-def greenhill_critical_moment(tension, length, bending):
-    """Clamped-clamped twisted rod under tension: smallest M with
-    u1 u2 sin(u1 - u2) = (u1 - u2) sin u1 sin u2, u = L (M ± √(M² − 4BT)) / (4B)."""
-
-    def f(m):
-        d = math.sqrt(max(m * m - 4 * bending * tension, 0.0))
-        u1, u2 = length * (m + d) / (4 * bending), length * (m - d) / (4 * bending)
-        # both sides vanish like u2² as T → 0; dividing by it keeps the root well conditioned
-        # (the limit is tan u1 = u1, M L / B = 8.9868)
-        return (u1 * u2 * math.sin(u1 - u2) - (u1 - u2) * math.sin(u1) * math.sin(u2)) / u2**2
-
-    lo = 2 * math.sqrt(bending * tension) * (1 + 1e-9) + 1e-9
-    grid = np.linspace(lo, lo + 40 * bending / length, 4000)
-    values = [f(m) for m in grid]
-    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
-        if fa == 0 or np.sign(fa) != np.sign(fb):
-            return brentq(f, a, b)
-    raise AssertionError("no root")
+greenhill_critical_moment = greenhill_clamped_moment
 
 
 def test_greenhill_reference_values():

@@ -1,0 +1,38 @@
+"""Closed-form references that figures compare against (no simulation here).
+
+The tests check these against the literature's numbers; the kernel never uses them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+
+
+def greenhill_clamped_moment(tension: float, length: float, bending: float) -> float:
+    """Smallest axial moment M [N m] at which a straight rod clamped at both ends, under
+    tension T [N], buckles (the clamped Greenhill problem): the first root of
+    u1·u2·sin(u1 − u2) = (u1 − u2)·sin u1·sin u2 with u = L·(M ± √(M² − 4BT))/(4B).
+    M_c·L/B = 8.9868 at T = 0 and 20.9835 at T·L²/B = 100; M_c → 2√(BT) for long rods.
+    """
+
+    def f(m):
+        d = math.sqrt(max(m * m - 4 * bending * tension, 0.0))
+        u1, u2 = length * (m + d) / (4 * bending), length * (m - d) / (4 * bending)
+        # both sides vanish like u2² as T → 0; dividing by it keeps the root well conditioned
+        return (u1 * u2 * math.sin(u1 - u2) - (u1 - u2) * math.sin(u1) * math.sin(u2)) / u2**2
+
+    lo = 2 * math.sqrt(bending * tension) * (1 + 1e-9) + 1e-9
+    grid = np.linspace(lo, lo + 40 * bending / length, 4000)
+    values = [f(m) for m in grid]
+    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+        if fa == 0 or np.sign(fa) != np.sign(fb):
+            return brentq(f, a, b)
+    raise ValueError(f"no clamped Greenhill root for T = {tension:g} N, L = {length:g} m")
+
+
+def long_rod_buckling_moment(tension: float, bending: float) -> float:
+    """M_c = 2√(B·T) [N m], the buckling moment of a long rod under tension."""
+    return 2.0 * math.sqrt(bending * tension)
