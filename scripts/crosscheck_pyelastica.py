@@ -86,9 +86,8 @@ def settings(case: str) -> dict:
 
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path) -> None:
     import elastica as ea
-    from elastica._rotations import _get_rotation_matrix
-
     from _common import machine
+    from elastica._rotations import _get_rotation_matrix
 
     c = settings(case)
     if final_time is not None:
@@ -318,7 +317,6 @@ def reference_rotation(case: str):
 
 
 def build_problem(case: str, sets, twist: str, kick: str):
-    import dataclasses
 
     from rodphase import config as C
     from rodphase import scenes
@@ -372,11 +370,11 @@ def build_problem(case: str, sets, twist: str, kick: str):
 
 def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
                  out: Path) -> dict:
+    from _common import machine
+
     from rodphase import classify
     from rodphase.rod import simulate
     from rodphase.topology import topology_history
-
-    from _common import machine
 
     sets = rodphase_sets(case, contact, dt, rotation_damping)
     problem = build_problem(case, sets, twist, kick)

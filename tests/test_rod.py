@@ -10,10 +10,8 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy.optimize import brentq
 
 from rodphase import config as C
-from rodphase.theory import greenhill_clamped_moment
 from rodphase.rod import (
     Contact,
     Controls,
@@ -33,6 +31,7 @@ from rodphase.rod import kernel as K
 from rodphase.rod.contact import add_contact_forces, brute_force_pairs, build_pairs, near_pairs
 from rodphase.rod.simulate import _rod_arrays
 from rodphase.scenes import SCENES, build
+from rodphase.theory import greenhill_clamped_moment
 
 FREE = Ends(start_held=(False,) * 3, start_frame_held=False)
 
