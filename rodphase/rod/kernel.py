@@ -41,7 +41,7 @@ I_HISTORY_EVERY = 13
 I_CHECK_EVERY = 14
 I_STOP_AT_EQUILIBRIUM = 15
 I_START_BODY = 16  # 1: a rigid rod beyond node 0, along -axis, takes part in contact
-I_END_BODY = 17  # 1: a rigid rod beyond node n, along +axis (the loading rod), ditto
+I_END_BODY = 17  # 1: a rigid rod beyond node n, along +axis (the loading rod); = I_START_BODY + 1
 I_PROBE = 18  # 1: an equilibrium ends the hold only if it survives a perturbation (stable)
 N_INTS = 19
 
@@ -693,22 +693,15 @@ def advance(x, v, Q, w, t_start, n_steps,
                 1.0 if incompressible else 0.0, force)
             # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
             # strand can pass around such an end, so link leaves only where the scene lets it.
-            if ints[I_START_BODY] != 0:
-                body_touching, body_worst, body_energy = add_body_forces(
-                    x, v, radius, contact_k, contact_c, f_stiff, 0, -1.0, axis,
-                    floats[F_BODY_RADIUS], exclusion, force)
-                touching += body_touching
-                contact_energy += body_energy
-                if body_worst > worst:
-                    worst, worst_at = body_worst, 0
-            if ints[I_END_BODY] != 0:
-                body_touching, body_worst, body_energy = add_body_forces(
-                    x, v, radius, contact_k, contact_c, f_stiff, n, 1.0, axis,
-                    floats[F_BODY_RADIUS], exclusion, force)
-                touching += body_touching
-                contact_energy += body_energy
-                if body_worst > worst:
-                    worst, worst_at = body_worst, n - 1
+            for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
+                if ints[I_START_BODY + which] != 0:
+                    body_touching, body_worst, body_energy = add_body_forces(
+                        x, v, radius, contact_k, contact_c, f_stiff, which * n,
+                        2.0 * which - 1.0, axis, floats[F_BODY_RADIUS], exclusion, force)
+                    touching += body_touching
+                    contact_energy += body_energy
+                    if body_worst > worst:
+                        worst, worst_at = body_worst, which * (n - 1)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
