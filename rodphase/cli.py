@@ -171,11 +171,13 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
 
 @main.command()
 @click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
-@click.option("--kind", type=click.Choice(["phase", "topology", "force", "response", "shape", "hat"]),
+@click.option("--kind", type=click.Choice(["phase", "topology", "force", "response", "shape", "hat",
+                                           "path"]),
               default="phase", show_default=True,
               help="phase: Φa vs L/L0 map; topology: Lk/Tw/Wr vs Φa; force: end force vs "
               "displacement; response: ΔU, ΔWr, ΔTw vs a modulus or radius ramp; shape: "
-              "final rod shapes; hat: extension and torque vs turns (scene hat_curve).")
+              "final rod shapes; hat: extension and torque vs turns (scene hat_curve); path: "
+              "each run's protocol as a line through the (L/L0, Φa) plane, marked by phase.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file.")
 @click.option("--run", "run_id", default=None, help="Run id for topology/force (default: first).")
 @click.option("--experiments", type=click.Path(exists=True, dir_okay=False),
@@ -184,8 +186,10 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
               help="Phase map twist axis (vertical; L/L0 is horizontal): rest = the paper's "
               "Φa = θ·a0/L0 (end rotation θ, rest radius a0, rest length L0); current = Φa of "
               "the stretched straight rod, θ·(a0/√e)/(e·L0) = rest Φa / e^1.5.")
+@click.option("--background", type=click.Path(exists=True, dir_okay=False),
+              help="With --kind path: a classified sweep file drawn faintly behind the paths.")
 @reports_errors
-def plot(store_file, kind, output, run_id, experiments, twist):
+def plot(store_file, kind, output, run_id, experiments, twist, background):
     """Draw a figure from OUT.h5."""
     import pandas as pd
 
@@ -202,6 +206,22 @@ def plot(store_file, kind, output, run_id, experiments, twist):
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
             P.phase_map(table, output, experiments=exp, twist=column)
+        elif kind == "path":
+            from .tabulate import path_table
+
+            ids = [run_id] if run_id else store.run_ids()[:6]
+            paths = {}
+            for rid in ids:
+                result = store.read_run(rid)
+                every = max(1, len(result.history["time"]) // 300)
+                paths[rid] = path_table(result, every=every)
+            behind = None
+            if background:
+                with read_store(background) as other:
+                    behind = other.table()
+                if "phase" not in behind:
+                    raise C.ConfigError(background, "not classified", "run `rodphase classify` first")
+            P.phase_path(paths, output, background=behind)
         elif kind == "shape":
             ids = store.run_ids()[:12]
             shapes = [(i, store.read_run(i).positions, store.read_run(i).rest_radius) for i in ids]

@@ -138,6 +138,43 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
         return _save(fig, path)
 
 
+def phase_path(paths: dict[str, pd.DataFrame], path, *, background: pd.DataFrame | None = None,
+               title: str | None = None) -> Path:
+    """Protocols drawn as paths through the phase diagram (L/L0 horizontal, Φa = θ·a0/L0
+    vertical), one line per named path table (`tabulate.path_table`), its points marked by
+    the phase of the rod there; `background` (a classified sweep table) is drawn faintly."""
+    with matplotlib.rc_context(STYLE):
+        fig = _figure(figsize=(5.6, 4.4))
+        ax = fig.add_subplot()
+        if background is not None and len(background):
+            column = "twist_density" if "twist_density" in background else "phi_a_rest"
+            for name, marker in PHASE_MARKERS.items():
+                rows = background["phase"] == name
+                ax.scatter(background.loc[rows, "extension"], background.loc[rows, column],
+                           marker=marker, s=18, c="0.85", edgecolors="0.7", linewidths=0.4,
+                           zorder=1)
+        colours = [BLACK, BLUE, VERMILLION, "0.45"]
+        handles = []
+        for k, (name, table) in enumerate(paths.items()):
+            colour = colours[k % len(colours)]
+            ax.plot(table["extension"], table["twist_density"], color=colour, lw=1.2, zorder=2)
+            handles.append(Line2D([], [], color=colour, lw=1.2, label=name))
+            for phase_name, marker in PHASE_MARKERS.items():
+                rows = table["phase"] == phase_name
+                ax.scatter(table.loc[rows, "extension"], table.loc[rows, "twist_density"],
+                           marker=marker, s=16, facecolors=colour, edgecolors="white",
+                           linewidths=0.3, zorder=3)
+        for phase_name, marker in PHASE_MARKERS.items():
+            handles.append(Line2D([], [], ls="", marker=marker, ms=5, mfc="0.3", mec="white",
+                                  label=phase_name))
+        ax.set_xlabel(r"extension $L/L_0$")
+        ax.set_ylabel(TWIST_DENSITY_LABEL)
+        ax.legend(handles=handles, frameon=False, fontsize=7, loc="best")
+        if title:
+            ax.set_title(title)
+        return _save(fig, path)
+
+
 def _experiments(ax, experiments: pd.DataFrame) -> list:
     """Overlay experimental transitions in black; return their legend handles."""
     series = (experiments["series"].astype(str) if "series" in experiments

@@ -49,3 +49,26 @@ def classify_store(store, **thresholds) -> pd.DataFrame:
     table = pd.DataFrame(rows)
     store.write_classification(table)
     return table
+
+
+def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
+               solenoid_above=0.5) -> pd.DataFrame:
+    """One run's protocol as a path through the phase diagram: per history row (every
+    `every`-th), time, stage, extension L/L0 of the end, the paper's Φa = θ·a0/L0 of the turns
+    put in so far, writhe if computed, and the snapshot's alignment and phase."""
+    d, h = result.diagnostics, result.history
+    rest_length, radius = float(d["rest_length"]), float(d["rest_radius"])
+    rows = np.arange(0, len(h["time"]), max(int(every), 1))
+    turned = h["end_rotation"] - h.get("start_rotation", 0.0)
+    values = [alignment(result.snapshot_positions[i], radius, rest_length=rest_length,
+                        epsilon=epsilon) for i in rows]
+    table = pd.DataFrame({
+        "time": h["time"][rows], "stage": h["stage"][rows],
+        "extension": 1.0 + h["end_displacement"][rows] / rest_length,
+        "twist_density": (turned * radius / rest_length)[rows],
+        "alignment": values,
+        "phase": [phase(v, plectoneme_below, solenoid_above) for v in values],
+    })
+    if "writhe" in h:
+        table["writhe"] = h["writhe"][rows]
+    return table

@@ -139,3 +139,18 @@ def test_hat_curve_draws_each_branch_and_marks_escapes(tmp_path):
     result.history["link_escapes"] = (np.arange(24) >= 12).astype(float)
     result.history["link"] = result.history["link"] - 2 * result.history["link_escapes"]
     assert is_png(plot.topology_curves(result, tmp_path / "escape.png"))
+
+
+def test_phase_path_draws_a_protocol_through_the_map(tmp_path):
+    from rodphase.tabulate import path_table
+
+    result = fake_result(rows=12)
+    result.diagnostics.update(rest_radius=0.025, rest_length=1.0)
+    table = path_table(result, every=2)
+    assert len(table) == 6 and set(table.columns) >= {"extension", "twist_density", "phase"}
+    # Φa = (end - start rotation)·a0/L0 row by row
+    h = result.history
+    expected = (h["end_rotation"] - h["start_rotation"])[::2] * 0.025
+    assert np.allclose(table["twist_density"], expected)
+    assert is_png(plot.phase_path({"pull": table}, tmp_path / "path.png",
+                                  background=sweep_table()))
