@@ -224,6 +224,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "pull": {
         "distance": (number(0, strict_min=True, unit="m"), 0.3),
         "rate": (number(0, strict_min=True, unit="m/s"), 0.02),
+        "extra_turns": (number(unit="turns put in during the pull (diagonal path)"), 0.0),
+        "release": (boolean, False),
     },
     "stiffen": {
         "factor": (number(1, 100, strict_min=True, unit="final E / initial E"), 3.0),

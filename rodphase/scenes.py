@@ -116,16 +116,28 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
 
 def solenoid_loss(cfg) -> Problem:
     """Fig 4a: form a solenoid as in twist_under_load, then pull the end by a distance at a
-    steady rate with its rotation held; the reaction force is the result."""
+    steady rate; the reaction force is the result. With the end rotation held this is a
+    horizontal path through the phase diagram (Φa = θ·a0/L0 fixed); `pull.extra_turns` turns
+    the end on during the pull (a diagonal path); `pull.release` moves the end back to where
+    the pull started, at the same rate and with the same rotation (a hysteresis loop)."""
     base = twist_under_load(cfg)
     force = C.load_force(cfg) or 0.0
     turns = C.twist_turns(cfg)
-    duration = cfg.pull.distance / cfg.pull.rate
+    p = cfg.pull
+    duration = p.distance / p.rate
     pull_ends = dataclasses.replace(ends_from(cfg), start_held=(True,) * 3, start_frame_held=True,
                                     end_held=(True, True, True), end_frame_held=True)
+    final = turns + p.extra_turns
     pull = Stage(duration, label="pull", ends=pull_ends, controls=Controls(
-        end_rotation=constant(TURN * turns), end_displacement=ramp(0, duration, 0, cfg.pull.distance)))
+        end_rotation=ramp(0, duration, TURN * turns, TURN * final),
+        end_displacement=ramp(0, duration, 0, p.distance)))
     base.stages = base.stages + (pull,)
+    if p.release:
+        # a stage with its own clock holds the end where it finds it: move it back by distance
+        release = Stage(duration, label="release", ends=pull_ends, controls=Controls(
+            end_rotation=ramp(0, duration, TURN * final, TURN * turns),
+            end_displacement=ramp(0, duration, 0, -p.distance)))
+        base.stages = base.stages + (release,)
     base.force_scale = max(force, rod_from(cfg).buckling_force)
     return base
 

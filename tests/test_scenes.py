@@ -255,3 +255,22 @@ def test_helical_buckling_scene_matches_the_closed_form_twist_and_writhe():
     # the end moved in by the slack and both clamps turned
     assert r.positions[-1, 2] == pytest.approx(97.0, abs=1e-6)
     assert h["start_rotation"][-1] == pytest.approx(-13.5 * TURN)
+
+
+def test_pull_paths_horizontal_diagonal_and_released():
+    # The protocol only (no simulation): a horizontal pull keeps the end rotation, a diagonal
+    # one turns it on by pull.extra_turns over the pull, a released one goes back the same way.
+    base = [("pull.distance", 0.2), ("pull.rate", 0.01)]
+    cfg = C.load_scene("solenoid_loss", base, SCENES)
+    turns = C.twist_turns(cfg)
+    pull = build(cfg).stages[-1]
+    assert pull.label == "pull" and pull.duration == pytest.approx(20.0)
+    assert pull.controls.end_rotation == ((0.0, 20.0), (TURN * turns, TURN * turns))
+    cfg = C.load_scene("solenoid_loss", base + [("pull.extra_turns", 2.0), ("pull.release", True)],
+                       SCENES)
+    pull, release = build(cfg).stages[-2:]
+    assert pull.controls.end_rotation[1] == pytest.approx((TURN * turns, TURN * (turns + 2)))
+    assert pull.controls.end_displacement[1] == pytest.approx((0.0, 0.2))
+    assert release.label == "release"
+    assert release.controls.end_rotation[1] == pytest.approx((TURN * (turns + 2), TURN * turns))
+    assert release.controls.end_displacement[1] == pytest.approx((0.0, -0.2))
