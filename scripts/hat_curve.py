@@ -2,7 +2,8 @@
 
     python scripts/hat_curve.py OUT.h5 [--plot DIR]
 
-Per run: the force; the buckling torque on the way up (the peak |end torque|) against the
+Per run: the force; the buckling torque on the way up (the peak |end torque| before the
+writhe first exceeds 0.2 turns) against the
 clamped Greenhill moment and 2√(BF) (rod of B/e², length e·L0); the turns at buckling and
 the jump in extension there; the post-buckling torque plateau M_p and slope dz/dn (metres
 per turn, fitted from one turn past buckling to the top) against the Maxwell relation of a
@@ -36,7 +37,11 @@ def measure(result) -> dict:
     e = 1 / (1 - force / (young * np.pi * radius**2))
     up = np.flatnonzero(stage == labels.index("up"))
     down = np.flatnonzero(stage == labels.index("down"))
-    peak = up[np.argmax(np.abs(torque[up]))]
+    # buckling: the torque peak before the rod first leaves the straight branch (a post-
+    # buckled plectoneme can carry more torque again later in the ramp)
+    left = up[writhe[up] > WRITHE_BUCKLED]
+    before = up[turns[up] <= (turns[left[0]] if len(left) else np.inf)]
+    peak = before[np.argmax(np.abs(torque[before]))]
     after = up[(turns[up] > turns[peak]) & (turns[up] < turns[peak] + 0.5)]
     fit = up[turns[up] > turns[peak] + 1.0]
     slope, plateau = (np.polyfit(turns[fit], z[fit], 1)[0], float(np.mean(torque[fit]))) if len(fit) > 5 \
