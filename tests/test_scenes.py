@@ -274,3 +274,14 @@ def test_pull_paths_horizontal_diagonal_and_released():
     assert release.label == "release"
     assert release.controls.end_rotation[1] == pytest.approx((TURN * (turns + 2), TURN * turns))
     assert release.controls.end_displacement[1] == pytest.approx((0.0, -0.2))
+
+
+def test_twist_put_in_faster_than_the_rod_follows_stops_and_names_the_twist_rate():
+    # 32 elements twisted at 50 turns/s to 1.91 turns: the end frame lags its clamp by more
+    # than 135° and the clamp spring's matrix log would wrap (before: `ok` with Lk 0.91 of
+    # the 1.91 turns). Now the run stops as unstable, says where, and names the key to change.
+    cfg = C.load_scene("twist_under_load", [("rod.elements", 32), ("loading.twist_rate", 50.0),
+                                            ("loading.twist_density", 0.3)], SCENES)
+    r = simulate(build(cfg), topology=True)
+    assert r.status == "unstable" and r.diagnostics["guard"] == "clamp_lag"
+    assert "loading.twist_rate" in r.message and "element 31" in r.message

@@ -109,6 +109,7 @@ S_NAN = 2
 S_SPEED = 3
 S_PENETRATION = 4
 S_RESOLUTION = 5  # neighbouring frames turned by more than 135°: the rod is under-resolved
+S_CLAMP_LAG = 6  # an end frame lags its turning clamp by more than 135°: twisted too fast
 
 # info entries
 D_WHERE = 0  # node or element index where a guard tripped
@@ -238,14 +239,16 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
     """Couple of a clamp spring between frames A and B (rows d1 d2 d3) over half an element.
 
     κ = log(A Bᵀ)/half_length in the material frame; result[0:3] = g3·B(κ − κ0) (the couple),
-    result[3:6] = half_length·κ × couple (its share of the κ × τ term), result[6] the energy.
+    result[3:6] = half_length·κ × couple (its share of the κ × τ term), result[6] the energy,
+    result[7] the cosine of the angle between the two frames.
     """
     # R_ab = row a of A · row b of B, only the entries the log needs
     a0 = 0.5 * (_row_dot(A, 2, B, 1) - _row_dot(A, 1, B, 2))
     a1 = 0.5 * (_row_dot(A, 0, B, 2) - _row_dot(A, 2, B, 0))
     a2 = 0.5 * (_row_dot(A, 1, B, 0) - _row_dot(A, 0, B, 1))
     trace = _row_dot(A, 0, B, 0) + _row_dot(A, 1, B, 1) + _row_dot(A, 2, B, 2)
-    factor = _log_factor(a0 * a0 + a1 * a1 + a2 * a2, 0.5 * (trace - 1.0))
+    result[7] = 0.5 * (trace - 1.0)
+    factor = _log_factor(a0 * a0 + a1 * a1 + a2 * a2, result[7])
     k0 = a0 * factor / half_length
     k1 = a1 * factor / half_length
     k2 = a2 * factor / half_length
@@ -554,7 +557,7 @@ def advance(x, v, Q, w, t_start, n_steps,
     held_start_frame = ints[I_START_FRAME_HELD] != 0
     held_end_frame = ints[I_END_FRAME_HELD] != 0
     clamp = np.empty((3, 3))
-    couple = np.empty(7)
+    couple = np.empty(8)
     kinetic_before = 0.0
     # Stability probe: a residual test cannot tell a stable equilibrium from an unstable one
     # (a straight twisted rod above its onset is in equilibrium too). A candidate is displaced
@@ -632,6 +635,12 @@ def advance(x, v, Q, w, t_start, n_steps,
             for c in range(3):
                 torque[c, 0] += couple[3 + c] - couple[c]
             energies[1] += couple[6]
+            if couple[7] < -0.7071:
+                # the clamp spring's log would wrap past 180° and twist the rod the wrong way
+                status = S_CLAMP_LAG
+                info[D_WHERE] = 0
+                info[D_VALUE] = np.arccos(max(couple[7], -1.0))
+                break
         if held_end_frame:
             rotated_frame(end_frame, axis, rot_end, clamp)
             e1 = dilatation[n - 1]
@@ -645,6 +654,11 @@ def advance(x, v, Q, w, t_start, n_steps,
                 clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
                                  + Q[2, c, n - 1] * couple[2]) * axis[c]
             energies[1] += couple[6]
+            if couple[7] < -0.7071:
+                status = S_CLAMP_LAG
+                info[D_WHERE] = n - 1
+                info[D_VALUE] = np.arccos(max(couple[7], -1.0))
+                break
 
         if contact_on:
             _radii(rest_radius, dilatation, f_radius, incompressible, radius)

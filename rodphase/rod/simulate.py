@@ -23,6 +23,7 @@ _GUARDS = {
     k.S_SPEED: ("speed", "runaway velocity"),
     k.S_PENETRATION: ("penetration", "contact penetration"),
     k.S_RESOLUTION: ("resolution", "under-resolved rod (neighbouring frames turned by more than 135°)"),
+    k.S_CLAMP_LAG: ("clamp_lag", "end frame lagging its turning clamp by more than 135°"),
 }
 
 
@@ -205,6 +206,9 @@ def clamp_twist(problem: Problem, start_frame, end_frame, history, positions, d1
 # (turns), is an escape: link moves in whole crossings (a strand passing around an end changes
 # Lk by ±2, through the closure), while Lk = Tw + Wr and the clamp bookkeeping hold to 1e-6.
 ESCAPE_THRESHOLD = 0.5
+# Lk − turns put in − escapes, turns, beyond which a run is not `ok`: the open-ribbon closure
+# with slightly bent end tangents leaves up to 6e-3 (measured, a plectoneme at 5× the rate).
+LINK_TOLERANCE = 0.05
 
 
 def link_escapes(history: dict) -> np.ndarray:
@@ -377,11 +381,14 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
             status = "unstable"
             guard, guard_words = _GUARDS[code]
             where = int(info[k.D_WHERE])
-            unit = {k.S_PENETRATION: "element", k.S_RESOLUTION: "Voronoi domain"}.get(code, "node")
-            advice = ("Use more rod.elements (twist per element = Φa·L0/(a·n) rad)."
-                      if code == k.S_RESOLUTION else
-                      "Try a smaller solver.dt or solver.safety, more solver.damping, or a "
-                      "stiffer contact.stiffness.")
+            unit = {k.S_PENETRATION: "element", k.S_RESOLUTION: "Voronoi domain",
+                    k.S_CLAMP_LAG: "element"}.get(code, "node")
+            advice = {
+                k.S_RESOLUTION: "Use more rod.elements (twist per element = Φa·L0/(a·n) rad).",
+                k.S_CLAMP_LAG: "The twist is put in faster than it spreads along the rod: lower "
+                               "loading.twist_rate (turns/s).",
+            }.get(code, "Try a smaller solver.dt or solver.safety, more solver.damping, or a "
+                        "stiffer contact.stiffness.")
             message = (f"unstable in {label} at t = {t_end:.4g} s: {guard_words} at {unit} "
                        f"{where} (value {info[k.D_VALUE]:.3g}); dt = {dt:.3g} s, stable bound "
                        f"{bound:.3g} s. {advice}")
@@ -422,6 +429,14 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                 notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
                              + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
                                          for e in events) + ")")
+            turns_in = (history["end_rotation"] - history["start_rotation"]) / (2 * np.pi)
+            unaccounted = float(np.max(np.abs(history["link"] - turns_in - np.cumsum(escapes))))
+            if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
+                status, guard = "unstable", "link"
+                message = (f"the stored link differs from the turns put in by {unaccounted:.3g} "
+                           f"turns with no escape to explain it (tolerance {LINK_TOLERANCE} "
+                           "turns): the twist was not carried by the rod as put in. Lower "
+                           "loading.twist_rate or use more rod.elements.")
 
     lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
     rest = arrays["rest_length"]
