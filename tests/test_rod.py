@@ -635,3 +635,18 @@ def test_friction_with_several_pairs_leaves_the_normal_springs_alone():
     add_contact_forces(x, v, np.full(3, 0.01), np.array([[0, 0], [2, 2]]), 2, np.full(3, 1e4),
                        np.zeros(3), 1.0, 0.3, 1e-4, 0.0, force)
     assert force[2, :2].sum() == pytest.approx(-2 * 1e4 * 0.005)
+
+
+def test_a_hold_that_runs_out_of_time_says_which_test_failed_and_by_how_much():
+    # A rod released bent and held for far too short a time: the message names each unmet
+    # criterion with its value and threshold (not "residual 5e-4 ... tolerance 1e-3").
+    rod = Rod(length=1.0, radius=0.025, elements=10)
+    state = straight_state(rod)
+    state.x[0] += 0.02 * np.sin(np.pi * np.linspace(0, 1, 11))
+    problem = Problem(rod=rod, state=state, ends=Ends(end_held=(True, True, True)),
+                      solver=Solver(tolerance=1e-6, settle_window=0.02),
+                      stages=(Stage(0.01, until_equilibrium=True, label="hold"),))
+    result = simulate(problem)
+    assert result.status == "not_converged"
+    assert "residual force" in result.message and "needs < 1e-06" in result.message
+    assert "window" in result.message and "solver.hold_max_time" in result.message

@@ -219,6 +219,32 @@ def link_escapes(history: dict) -> np.ndarray:
     return np.where(np.abs(surplus) > ESCAPE_THRESHOLD, surplus, 0.0)
 
 
+def _unmet_criteria(solver, floats, info) -> str:
+    """Which of the hold's equilibrium tests failed at its end, each with value and threshold."""
+    tol = solver.tolerance
+    failed = []
+    residual, kinetic = info[k.D_RESIDUAL], info[k.D_KINETIC]
+    if residual >= tol:
+        failed.append(f"residual force {residual:.2g} of the force scale (needs < {tol:g})")
+    if kinetic >= tol * tol:
+        failed.append(f"kinetic energy {kinetic:.2g} of force scale × L0 (needs < {tol * tol:g})")
+    window = floats[k.F_SETTLE_WINDOW]
+    if window > 0:
+        motion = info[k.D_SETTLE_MOTION]
+        if not np.isfinite(motion):
+            failed.append(f"the shape had no two full {window:g} s windows to compare")
+        else:
+            failed.append(f"the window-mean shape moved {1e3 * motion:.3g} mm per {window:g} s "
+                          f"(needs < {1e3 * floats[k.F_SETTLE_DISTANCE]:.3g} mm)")
+    undecided = int(info[k.D_PROBES] - info[k.D_PROBES_LEFT])
+    if undecided > 0 and not failed:
+        failed.append("the stability probe of the last equilibrium neither decayed nor grew "
+                      f"(size {floats[k.F_PROBE_SIZE]:.3g} m; marginally stable)")
+    elif undecided > 0:
+        failed.append("a stability probe was still undecided")
+    return "; ".join(failed) + "." if failed else "no test failed at the last check."
+
+
 def rotational_damping_auto(rod) -> float:
     """40·√(G/ρ)/L0 [1/s]: see Solver.rotational_damping."""
     return 40.0 * math.sqrt(rod.wave_moduli[1] / rod.density) / rod.length
@@ -395,10 +421,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
             break
         if stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
             status = "not_converged"
-            message = (f"{label} did not reach equilibrium in {stage.duration:g} s (residual "
-                       f"{info[k.D_RESIDUAL]:.2g}, kinetic {info[k.D_KINETIC]:.2g}, tolerance "
-                       f"{problem.solver.tolerance:g}). Increase the hold time, the damping, or "
-                       f"the tolerance.")
+            message = f"{label} did not reach equilibrium in {stage.duration:g} s: " + \
+                _unmet_criteria(problem.solver, floats, info) + \
+                " Hold longer (solver.hold_max_time) or damp more (solver.damping)."
         if steps_total >= budget:
             if status == "ok":
                 status = "not_converged"
