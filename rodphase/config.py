@@ -39,6 +39,7 @@ class Frozen(dict):
         raise TypeError("configuration is read-only; use --set to change it")
 
     __setitem__ = __delitem__ = update = pop = popitem = setdefault = clear = _blocked  # type: ignore
+    __setattr__ = __delattr__ = _blocked  # cfg.rod.elements = 40 would be silently ignored
 
     def plain(self) -> dict:
         def convert(v):

@@ -20,6 +20,7 @@ import numpy as np
 from . import __version__
 from . import config as C
 from .result import RunResult
+from .rod.simulate import current_radii
 
 # ---------------------------------------------------------------- samplers
 
@@ -136,11 +137,12 @@ def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
             return [(rid, p, None, error) for rid, p in zip(job.run_ids, job.params)]
     if job.twist_targets is None:
         return [(job.run_ids[0], job.params[0], result, "")]
-    return [(rid, p, split_continuation(result, k), "")
+    incompressible = job.scene["material"]["incompressible"]
+    return [(rid, p, split_continuation(result, k, incompressible), "")
             for k, (rid, p) in enumerate(zip(job.run_ids, job.params))]
 
 
-def split_continuation(result: RunResult, k: int) -> RunResult:
+def split_continuation(result: RunResult, k: int, incompressible: bool = True) -> RunResult:
     """The k-th sample of a continuation run: the state where its hold ended, the history up
     to there, and the status of that hold (or of the run, if it stopped before)."""
     from dataclasses import replace
@@ -157,14 +159,16 @@ def split_continuation(result: RunResult, k: int) -> RunResult:
     positions, directors = result.stage_states[index]
     hold = stages[index]
     lengths = np.linalg.norm(np.diff(positions, axis=0), axis=1)
-    radius = result.diagnostics["rest_radius"]
+    radius_factor = float(result.history["radius_factor"][row - 1]) if row > 0 else 1.0
     status = "ok" if hold["equilibrium"] else "not_converged"
     message = ("completed" if status == "ok" else
                f"hold {k} did not reach equilibrium (residual {hold['residual']:.2g})")
     diagnostics = dict(result.diagnostics, continuation_sample=k,
                        final_time=hold["end_time"])
     return replace(result, status=status, message=message, positions=positions,
-                   directors=directors, radii=radius * np.sqrt(result.rest_lengths / lengths),
+                   directors=directors,
+                   radii=current_radii(result.diagnostics["rest_radius"], incompressible,
+                                       result.rest_lengths, lengths, radius_factor),
                    history={key: v[:row] for key, v in result.history.items()},
                    snapshot_positions=result.snapshot_positions[:row],
                    snapshot_d1=result.snapshot_d1[:row], diagnostics=diagnostics,

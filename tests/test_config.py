@@ -140,3 +140,36 @@ def test_twist_density_of_the_stretched_rod():
     with pytest.raises(C.ConfigError, match="only one of"):
         C.validate_scene(with_(with_(SCENE, "loading.twist_density", 1.0),
                                "loading.twist_density_current", 1.2), SCENES)
+
+
+def test_seams_gravity_shear_modulus_and_frozen_attributes():
+    # physics.gravity reaches every stage's controls (it was validated and then dropped)
+    from rodphase.rod import Rod
+    from rodphase.scenes import SCENES, build
+
+    cfg = C.load_scene("twist_under_load", [("physics.gravity", [0, 0, -9.81])], SCENES)
+    problem = build(cfg)
+    assert all(s.controls.gravity == (0.0, 0.0, -9.81) for s in problem.stages)
+    cfg = C.load_scene("solenoid_loss", [("physics.gravity", [0, 0, -9.81])], SCENES)
+    assert build(cfg).stages[-1].controls.gravity == (0.0, 0.0, -9.81)
+    # the engine's default G is 2E/3 of the rod's own E, not of 1 MPa
+    assert Rod(length=1.0, radius=0.02, elements=4, youngs_modulus=1e7).shear_modulus == \
+        pytest.approx(2e7 / 3)
+    # a loaded config cannot be changed by attribute (it was accepted and ignored)
+    with pytest.raises(TypeError):
+        cfg.rod.elements = 40
+
+
+def test_a_stage_of_zero_length_is_skipped_not_the_end_of_the_run():
+    from rodphase.rod import simulate
+    from rodphase.scenes import SCENES, build
+
+    cfg = C.load_scene("twist_under_load", [("rod.elements", 16), ("loading.force_ramp_time", 0),
+                                            ("loading.twist_density", 0.05),
+                                            ("solver.hold_max_time", 0.5)], SCENES)
+    result = simulate(build(cfg))
+    labels = [s["label"] for s in result.diagnostics["stages"]]
+    assert labels == ["load", "twist 0", "hold 0"]
+    assert result.diagnostics["stages"][0]["steps"] == 0
+    assert result.diagnostics["stages"][1]["steps"] > 0  # the twist ran (was: 0 steps, "ok")
+    assert result.history["end_rotation"][-1] == pytest.approx(0.05 / 0.025)

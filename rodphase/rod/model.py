@@ -41,7 +41,7 @@ class Rod:
     elements: int
     density: float = 1000.0  # kg/m³
     youngs_modulus: float = 1.0e6  # Pa
-    shear_modulus: float = 2.0e6 / 3.0  # Pa; the paper's G = 2E/3
+    shear_modulus: float | None = None  # Pa; None = the paper's G = 2E/3 of this E
     rest_curvature: tuple[float, float, float] = (0.0, 0.0, 0.0)
     incompressible: bool = True
     # Stiffnesses given directly (None: from E, G and the radius), for rods that are not
@@ -52,6 +52,10 @@ class Rod:
     twist_stiffness_given: float | None = None
     shear_stiffness_given: float | None = None
     axial_stiffness_given: float | None = None
+
+    def __post_init__(self):
+        if self.shear_modulus is None:
+            object.__setattr__(self, "shear_modulus", 2.0 * self.youngs_modulus / 3.0)
 
     @property
     def area(self) -> float:

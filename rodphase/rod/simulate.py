@@ -219,6 +219,14 @@ def link_escapes(history: dict) -> np.ndarray:
     return np.where(np.abs(surplus) > ESCAPE_THRESHOLD, surplus, 0.0)
 
 
+def current_radii(rest_radius: float, incompressible: bool, rest_lengths: np.ndarray,
+                  lengths: np.ndarray, radius_factor: float = 1.0) -> np.ndarray:
+    """(n,) element radii of a deformed rod: the rest radius × the growth factor, thinned as
+    a0/√e by the stretch e = l/l0 when the rod is incompressible."""
+    thinning = np.sqrt(rest_lengths / lengths) if incompressible else 1.0
+    return rest_radius * radius_factor * thinning
+
+
 def _unmet_criteria(solver, floats, info) -> str:
     """Which of the hold's equilibrium tests failed at its end, each with value and threshold."""
     tol = solver.tolerance
@@ -366,6 +374,16 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
             end_position = state.x[:, n].copy()
         table_t, table_v, table_n = _table_arrays(tables, shift)
         n_steps = int(math.ceil(stage.duration / dt - 1e-9))
+        if n_steps <= 0:
+            # a stage of zero length (e.g. no load ramp) has nothing to do; it keeps its place
+            # in the report so that stage indices and labels stay aligned
+            stage_ends.append(sum(len(r) for r in rows_h) - 1)
+            stage_states.append((state.positions, state.directors))
+            stage_report.append({"label": stage.label or f"stage {index}", "steps": 0,
+                                 "end_time": float(state.time), "equilibrium": False,
+                                 "settled": False, "residual": float("nan"), "probes": 0,
+                                 "probes_left": 0, "settle_motion": float("nan")})
+            continue
         n_steps = min(n_steps, budget - steps_total)
         if n_steps <= 0:
             break
@@ -466,7 +484,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
     rest = arrays["rest_length"]
     radius_factor = float(hist[-1, k.H_RADIUS_FACTOR]) if len(hist) else 1.0
-    radii = rod.radius * radius_factor * (np.sqrt(rest / lengths) if rod.incompressible else 1.0)
+    radii = current_radii(rod.radius, rod.incompressible, rest, lengths, radius_factor)
     diagnostics = {
         "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
         "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
