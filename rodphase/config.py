@@ -11,6 +11,7 @@ import difflib
 import hashlib
 import json
 import math
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -381,6 +382,49 @@ def straight_extension(cfg) -> float:
 
 # ---------------------------------------------------------------- loading files
 
+class _StrictLoader(yaml.SafeLoader):
+    """Safe YAML that refuses what a config never needs and a typo or a crafted file uses:
+    a key given twice in one mapping (PyYAML keeps the last one silently) and aliases (a
+    nested alias "bomb" expands exponentially once the config is copied or hashed)."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.constructor.ConstructorError(
+                None, None, f"alias *{event.anchor} (anchors and aliases are not allowed in "
+                "rodphase configs)", event.start_mark)
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} given twice in one mapping", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _no_octal(loader, node):
+    if re.fullmatch(r"[-+]?0[0-9_]+", node.value):
+        raise yaml.constructor.ConstructorError(
+            None, None, f"{node.value} has a leading zero (YAML 1.1 reads it as octal); write "
+            f"{node.value.lstrip('+-0_') or '0'}", node.start_mark)
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:int", _no_octal)
+
+
+def _yaml(text: str):
+    return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+
+
+def _short(text: str, limit: int = 60) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[:limit] + "..."
+
 def parse_override(item: str) -> tuple[str, Any]:
     if "=" not in item:
         raise ConfigError("--set", item, "key.path=value, e.g. rod.elements=60")
@@ -388,10 +432,13 @@ def parse_override(item: str) -> tuple[str, Any]:
     key = key.strip()
     if not key or any(not part for part in key.split(".")):
         raise ConfigError("--set", item, "key.path=value, e.g. rod.elements=60")
+    if re.fullmatch(r"[-+]?0[0-9_]+", value.strip()):
+        # YAML 1.1 (PyYAML) reads 020 as the octal 16
+        raise ConfigError(key, value, "a number without leading zeros (YAML reads 020 as octal 16)")
     try:
-        parsed = yaml.safe_load(value)
+        parsed = _yaml(value)
     except yaml.YAMLError as exc:
-        raise ConfigError(key, value, f"a YAML value ({exc.problem})") from None
+        raise ConfigError(key, value, f"a YAML value ({getattr(exc, 'problem', exc)})") from None
     return key, parsed
 
 
@@ -417,11 +464,18 @@ def read_yaml(path: str | Path) -> dict:
     if not path.exists():
         raise ConfigError("config file", str(path), "an existing YAML file")
     try:
-        data = yaml.safe_load(path.read_text())
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(str(path), "not UTF-8 text", "a YAML config file") from None
+    try:
+        data = _yaml(text)
     except yaml.YAMLError as exc:
-        raise ConfigError(str(path), "invalid YAML", str(exc).splitlines()[0]) from None
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(str(path), "invalid YAML", f"{problem}{where}") from None
     if not isinstance(data, dict):
-        raise ConfigError(str(path), data, "a YAML mapping")
+        raise ConfigError(str(path), _short(data), "a YAML mapping (a rodphase scene or sweep)")
     return data
 
 

@@ -173,3 +173,37 @@ def test_a_stage_of_zero_length_is_skipped_not_the_end_of_the_run():
     assert result.diagnostics["stages"][0]["steps"] == 0
     assert result.diagnostics["stages"][1]["steps"] > 0  # the twist ran (was: 0 steps, "ok")
     assert result.history["end_rotation"][-1] == pytest.approx(0.05 / 0.025)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("scene: twist_under_load\nrod: {elements: 40}\nrod: {elements: 60}\n", "given twice"),
+    ("scene: twist_under_load\nrod: {elements: 020}\n", "leading zero"),
+    ("a: &x [1, 2]\nb: *x\n", "aliases are not allowed"),
+    ("just some prose that is not a config\n", "a YAML mapping"),
+])
+def test_configs_that_yaml_would_accept_silently_are_refused(tmp_path, text, words):
+    path = tmp_path / "scene.yaml"
+    path.write_text(text)
+    with pytest.raises(C.ConfigError, match=words):
+        C.read_yaml(path)
+
+
+def test_a_binary_config_and_an_octal_override_are_named(tmp_path):
+    path = tmp_path / "scene.yaml"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")
+    with pytest.raises(C.ConfigError, match="not UTF-8"):
+        C.read_yaml(path)
+    with pytest.raises(C.ConfigError, match="leading zeros"):
+        C.parse_override("rod.elements=020")
+
+
+def test_a_history_interval_that_would_not_fit_is_refused_before_simulating():
+    from rodphase.rod import simulate
+
+    # a snapshot per step of a 200-element rod over a 1000 s hold: ~5e11 bytes
+    cfg = C.load_scene("twist_under_load", [("output.history_interval", 1e-9),
+                                            ("rod.elements", 200),
+                                            ("solver.hold_max_time", 1000)], SCENES)
+    result = simulate(build(cfg))
+    assert result.status == "unstable" and result.diagnostics["steps"] == 0
+    assert "output.history_interval" in result.message

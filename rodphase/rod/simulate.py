@@ -202,6 +202,8 @@ def clamp_twist(problem: Problem, start_frame, end_frame, history, positions, d1
     return extra / (2 * np.pi)
 
 
+SNAPSHOT_LIMIT = 2e9  # bytes of snapshots one run may keep in memory
+
 # A change of link between two history rows that the clamps did not put in, larger than this
 # (turns), is an escape: link moves in whole crossings (a strand passing around an end changes
 # Lk by ±2, through the closure), while Lk = Tw + Wr and the clamp bookkeeping hold to 1e-6.
@@ -339,6 +341,16 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                             "guard cannot see the blow-up, so the run was not started. Use "
                             "solver.dt: auto, a dt below the bound, or quadratic_drag: 0.")
     history_every = max(1, int(round(problem.solver.history_interval / dt)))
+    rows = sum(math.ceil(s.duration / dt) for s in problem.stages) / history_every
+    snapshot_bytes = rows * (2 * n + 1) * 3 * 8
+    if snapshot_bytes > SNAPSHOT_LIMIT:
+        # refuse before simulating: the snapshots would not fit, and the run would be lost
+        # at its end (MemoryError) after all its steps
+        return _refused(problem, dt, bound, (
+            f"output.history_interval = {problem.solver.history_interval:g} s asks for "
+            f"{rows:.3g} snapshots ({snapshot_bytes / 1e9:.3g} GB) for this protocol; allowed: "
+            f"at most {SNAPSHOT_LIMIT / 1e9:g} GB, i.e. history_interval >= "
+            f"{problem.solver.history_interval * snapshot_bytes / SNAPSHOT_LIMIT:.3g} s"))
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
     initial_end = state.x[:, n].copy()
