@@ -153,12 +153,14 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
 @reports_errors
 def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     """Label every run of OUT.h5 by loop alignment and store the table back into it."""
-    import h5py
-
-    from .store import Store, write_table_csv
+    from .store import edit_store, write_table_csv
     from .tabulate import classify_store
 
-    with Store(h5py.File(store_file, "r+")) as store:
+    with edit_store(store_file) as store:
+        if not store.run_ids():
+            raise C.ConfigError(store_file, "no finished runs yet",
+                                "a store with at least one run (a sweep killed before its "
+                                "first run has none; run the same sweep command again)")
         table = classify_store(store, epsilon=epsilon, plectoneme_below=plectoneme_below,
                                solenoid_above=solenoid_above)
     counts = table["phase"].value_counts().to_dict()
@@ -191,12 +193,21 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
 @reports_errors
 def plot(store_file, kind, output, run_id, experiments, twist, background):
     """Draw a figure from OUT.h5."""
+    _make_parent(output)
+    try:
+        _draw(store_file, kind, output, run_id, experiments, twist, background)
+    except ValueError as exc:
+        # a figure that this file's data cannot make (say why, no traceback)
+        raise C.ConfigError(f"--kind {kind}", store_file, str(exc)) from None
+    click.echo(f"written {output}")
+
+
+def _draw(store_file, kind, output, run_id, experiments, twist, background):
     import pandas as pd
 
     from . import plot as P
     from .store import read_store
 
-    _make_parent(output)
     with read_store(store_file) as store:
         if kind == "phase":
             table = store.table()
@@ -237,7 +248,6 @@ def plot(store_file, kind, output, run_id, experiments, twist, background):
                 P.control_response(result, output)
             else:
                 P.force_displacement(result.history, output)
-    click.echo(f"written {output}")
 
 
 @main.command()

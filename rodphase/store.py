@@ -288,9 +288,33 @@ def open_store(path, *, config_text: str, config_hash: str, version: str, kind: 
     return Store(file)
 
 
+class NotAStore(StoreMismatch):
+    """The file is not a rodphase store: not HDF5 at all, or HDF5 from another program."""
+
+
 def read_store(path) -> Store:
-    """Open an existing store read-only."""
-    return Store(h5py.File(path, "r"))
+    """Open an existing store read-only; NotAStore if `path` is not a rodphase store."""
+    return _open_existing(path, "r")
+
+
+def edit_store(path) -> Store:
+    """Open an existing store to add its classification; NotAStore if it is not one."""
+    return _open_existing(path, "r+")
+
+
+def _open_existing(path, mode: str) -> Store:
+    try:
+        file = h5py.File(path, mode)
+    except OSError as exc:
+        reason = str(exc).split("(")[-1].rstrip(")") if "(" in str(exc) else str(exc)
+        raise NotAStore(f"{path} cannot be read as HDF5 ({reason}): give a file written by "
+                        "rodphase run or rodphase sweep") from None
+    if _plain(file.attrs.get("format")) != FORMAT or "runs" not in file:
+        file.close()
+        raise NotAStore(f"{path} is an HDF5 file but not a rodphase store (no format "
+                        f"'{FORMAT}' attribute or /runs group): give a file written by "
+                        "rodphase run or rodphase sweep")
+    return Store(file)
 
 
 def read_table(path) -> pd.DataFrame:

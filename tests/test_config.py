@@ -207,3 +207,34 @@ def test_a_history_interval_that_would_not_fit_is_refused_before_simulating():
     result = simulate(build(cfg))
     assert result.status == "unstable" and result.diagnostics["steps"] == 0
     assert "output.history_interval" in result.message
+
+
+def test_files_that_are_not_rodphase_stores_get_one_error_line(tmp_path):
+    import h5py
+
+    runner = CliRunner()
+    text = tmp_path / "notes.h5"
+    text.write_text("not hdf5")
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as f:
+        f["data"] = [1, 2, 3]
+    for command in (["classify", str(text)], ["classify", str(foreign)],
+                    ["plot", str(text), "-o", str(tmp_path / "x.png")],
+                    ["plot", str(foreign), "-o", str(tmp_path / "x.png")]):
+        result = runner.invoke(main, command)
+        assert result.exit_code == 2, (command, result.output)
+        assert "error:" in result.output and "rodphase" in result.output
+        assert "Traceback" not in result.output
+
+
+def test_a_figure_the_data_cannot_make_is_an_error_line(tmp_path):
+    # `plot --kind response` on a run with no material ramp (was a ValueError traceback)
+    runner = CliRunner()
+    out = tmp_path / "run.h5"
+    result = runner.invoke(main, ["run", "twist_under_load", "-o", str(out), "--set",
+                                  "rod.elements=8", "--set", "loading.twist_density=0.01",
+                                  "--set", "solver.hold_max_time=0.05", "--set",
+                                  "loading.force_ramp_time=0.05"])
+    assert result.exit_code in (0, 1), result.output
+    result = runner.invoke(main, ["plot", str(out), "--kind", "response", "-o", str(tmp_path / "r.png")])
+    assert result.exit_code == 2 and "error: --kind response" in result.output
