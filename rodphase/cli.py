@@ -131,8 +131,9 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
                        echo=click.echo)
     by_status = Counter(status for _, status, _ in report.failures)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(by_status.items())) or "0 failed"
+    compiled = f" (+ {report.compile_time:.1f} s compiling)" if report.compile_time else ""
     click.echo(f"{report.done} ok, {counts}, {report.skipped} skipped of {report.total} in "
-               f"{report.wall:.1f} s; written to {output}")
+               f"{report.wall:.1f} s{compiled}; written to {output}")
     for run_id, status, message in report.failures:
         click.echo(f"  {run_id}: {status}: {message}")
     if by_status.get("not_converged"):
