@@ -276,7 +276,8 @@ def rotational_damping_equivalent(case: str) -> float:
     return 4.0 * settings(case)["damping_constant"] / BASE_RADIUS**2
 
 
-def rodphase_sets(case: str, contact: str, dt: str, rotation_damping: str) -> list[tuple[str, object]]:
+def rodphase_sets(case: str, contact: str, dt: str, rotation_damping: str,
+                  bodies: str = "none") -> list[tuple[str, object]]:
     """The --set keys (SCENE_SCHEMA) of twist_under_load that carry the example's settings."""
     c = settings(case)
     sets = [("rod.elements", c["n_elem"]), ("rod.density", c["density"]),
@@ -286,7 +287,7 @@ def rodphase_sets(case: str, contact: str, dt: str, rotation_damping: str) -> li
             ("loading.force", c["force"]), ("loading.force_ramp_time", max(c["time_start_twist"] - 1, 1.0)),
             ("loading.twist_turns", float(c["turns"])), ("loading.twist_rate", c["rate_turns_per_s"]),
             ("physics.self_contact", True), ("physics.friction", 0.0),
-            ("ends.start_body", "none"), ("ends.end_body", "none"),
+            ("ends.start_body", bodies), ("ends.end_body", bodies),
             ("solver.damping", c["damping_constant"]), ("solver.quadratic_drag", 0.0),
             ("solver.hold_until", "time"), ("solver.hold_max_time", c["time_relax"]),
             ("output.history_interval", 0.1)]
@@ -309,14 +310,16 @@ def rodphase_sets(case: str, contact: str, dt: str, rotation_damping: str) -> li
     return sets
 
 
-def reference_rotation(case: str):
-    """(times, rad) of the end rotation PyElastica actually applied, from the raw frames."""
-    raw = np.load(Path(f"/tmp/crosscheck_raw_{case}.npz"))
-    t = raw["time"]
-    return t, end_rotation(t, raw["d1"][:, -1], raw["omega_end"])
+def reference_rotation(case: str, path: Path | None = None):
+    """(times, rad) of the end rotation PyElastica actually applied, from the stored
+    reference (0.5 s samples: the rotation is linear in time during the twist, so
+    interpolating them is exact up to the one-step snap at the end of the twist)."""
+    ref = np.load(path or DATA / f"crosscheck_{case}.npz")
+    return ref["time"], ref["end_rotation"]
 
 
-def build_problem(case: str, sets, twist: str, kick: str):
+def build_problem(case: str, sets, twist: str, kick: str, kick_scale: float = 1.0,
+                  reference: Path | None = None):
 
     from rodphase import config as C
     from rodphase import scenes
@@ -333,14 +336,18 @@ def build_problem(case: str, sets, twist: str, kick: str):
     # m_node*1e-4/dt (0.04 N) along -z of PyElastica (-x here); rodphase has no point force,
     # so a uniform load with the same projection on the first mode, (pi/2)*F/M
     point = c["density"] * math.pi * BASE_RADIUS**2 * (BASE_LENGTH / n) * KICK / c["dt"]
-    g = (-(math.pi / 2) * point / MASS, 0.0, 0.0) if kick == "load" else (0.0, 0.0, 0.0)
+    g = (-(math.pi / 2) * point / MASS * kick_scale, 0.0, 0.0) if kick == "load" else (0.0, 0.0, 0.0)
     if c["initial_kick"] and kick != "none":
         problem.state.v[0, n // 2] -= KICK
     if twist == "as-run":
-        tr, rot = reference_rotation(case)
+        tr, rot = reference_rotation(case, reference)
         keep = (tr >= t0) & (tr <= t0 + tt + 1e-9)
-        table = (tuple(tr[keep] - t0), tuple(rot[keep]))
-        final = float(rot[tr <= t0 + tt + 1e-9][-1])
+        ts, vs = list(tr[keep] - t0), list(rot[keep])
+        if ts[-1] < tt:  # to the end of the twist at the last sampled rate
+            vs.append(vs[-1] + (vs[-1] - vs[-2]) / (ts[-1] - ts[-2]) * (tt - ts[-1]))
+            ts.append(tt)
+        table = (tuple(ts), tuple(vs))
+        final = vs[-1]
         # after the twist PyElastica sets the end frame to R(-2 pi turns) Q_end: the
         # nearest whole turn, reached in one step
         final_turns = round(final / turn)
@@ -348,8 +355,11 @@ def build_problem(case: str, sets, twist: str, kick: str):
     else:
         table = ramp(0.0, tt, 0.0, turn * c["turns"])
         final = turn * c["turns"]
+    # PyElastica has nothing beyond the clamped ends ("none"); rodphase's default ("rod")
+    # fixes them to holder cylinders that take part in contact
     base = dict(start_held=(True,) * 3, start_frame_held=True, axis=(0.0, 0.0, 1.0),
-                start_body=False, end_body=False)
+                start_body=cfg.ends.start_body == "rod", end_body=cfg.ends.end_body == "rod",
+                body_radius=cfg.ends.body_radius)
     free = Ends(end_held=(False,) * 3, end_frame_held=False, **base)
     sliding = Ends(end_held=(True, True, False), end_frame_held=True, **base)
     clamped = Ends(end_held=(True, True, True), end_frame_held=True, **base)
@@ -369,15 +379,16 @@ def build_problem(case: str, sets, twist: str, kick: str):
 
 
 def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
-                 out: Path) -> dict:
+                 out: Path, bodies: str = "none", kick_scale: float = 1.0,
+                 reference: Path | None = None) -> dict:
     from _common import machine
 
     from rodphase import classify
     from rodphase.rod import simulate
     from rodphase.topology import topology_history
 
-    sets = rodphase_sets(case, contact, dt, rotation_damping)
-    problem = build_problem(case, sets, twist, kick)
+    sets = rodphase_sets(case, contact, dt, rotation_damping, bodies)
+    problem = build_problem(case, sets, twist, kick, kick_scale, reference)
     cpu0 = time.process_time()
     result = simulate(problem, topology=True)
     cpu = time.process_time() - cpu0
@@ -388,7 +399,8 @@ def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotati
     lk, tw, wr = topology_history(X, D) if len(X) else (np.zeros(0),) * 3
     al = classify.alignment(result.positions, BASE_RADIUS, rest_length=BASE_LENGTH)
     d = result.diagnostics
-    info = {"case": case, "sets": [[k, v] for k, v in sets], "twist": twist, "kick": kick,
+    info = {"case": case, "sets": [[k, v] for k, v in sets], "twist": twist, "kick": kick, "kick_scale": kick_scale,
+            "contact": contact, "bodies": bodies, "rotational_damping": rotation_damping,
             "status": result.status, "message": result.message, "cpu_time": cpu,
             "dt": d["dt"], "dt_bound": d["dt_bound"], "steps": d["steps"],
             "us_per_step": d["us_per_step"], "max_pairs": d.get("max_pairs"),
@@ -454,7 +466,11 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
     on_r, on_p = onset(ref["time"], ref["writhe"]), onset(rp["time"], rp["writhe"])
     al_r = classify.alignment(ref["final_positions"], BASE_RADIUS, rest_length=BASE_LENGTH)
     al_p = classify.alignment(rp["final_positions"], BASE_RADIUS, rest_length=BASE_LENGTH)
+    own = rp["link_rodphase"]
     lines += ["",
+              f"- rodphase's own final Lk (clamp half-elements included, as `rodphase run` reports): "
+              f"{own[-1] if len(own) else math.nan:.3f}; the columns above use one estimator for both "
+              f"(nodes + d1 of the elements, closure by rays along the end tangents)",
               f"- buckling onset (first |Wr| > 0.5 turns): reference {on_r:.2f} s, rodphase {on_p:.2f} s",
               f"- final alignment / phase: reference {al_r:.3f} ({classify.phase(al_r)}), "
               f"rodphase {al_p:.3f} ({classify.phase(al_p)})",
@@ -471,9 +487,9 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
         import matplotlib.pyplot as plt
 
         fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-        for key, col in (("link", "C0"), ("twist", "C1"), ("writhe", "C2")):
-            axes[0].plot(ref["time"], ref[key], color=col, lw=2, alpha=0.5, label=f"{key[:2].title()} PyElastica")
-            axes[0].plot(rp["time"], rp[key], color=col, lw=1, ls="--", label=f"{key[:2].title()} rodphase")
+        for key, name, col in (("link", "Lk", "C0"), ("twist", "Tw", "C1"), ("writhe", "Wr", "C2")):
+            axes[0].plot(ref["time"], ref[key], color=col, lw=2, alpha=0.5, label=f"{name} PyElastica")
+            axes[0].plot(rp["time"], rp[key], color=col, lw=1, ls="--", label=f"{name} rodphase")
         axes[0].set_ylabel("turns")
         axes[0].legend(ncol=3, fontsize=7)
         axes[1].plot(ref["time"], ref["end_position"][:, ax], lw=2, alpha=0.5, label="PyElastica")
@@ -518,8 +534,16 @@ def main(argv=None) -> int:
     r.add_argument("--twist", choices=("as-run", "nominal"), default="as-run",
                    help="as-run: the end rotation PyElastica applied (needs the raw reference); "
                         "nominal: turns at the nominal rate")
-    r.add_argument("--kick", choices=("load", "none"), default="load")
+    r.add_argument("--kick", choices=("load", "none"), default="load",
+                   help="load: the example's mid-node kick as a uniform lateral load of the same "
+                        "first-mode projection; none: no perturbation")
+    r.add_argument("--kick-scale", type=float, default=1.0, help="factor on that load")
     r.add_argument("--rotational-damping", default="example", help="example (4 nu/a^2), auto, or 1/s")
+    r.add_argument("--end-bodies", choices=("none", "rod"), default="none",
+                   help="none: nothing beyond the clamps, as in PyElastica; rod: rodphase's "
+                        "holder cylinders (ends.start_body/end_body), which stop loops slipping off")
+    r.add_argument("--reference", type=Path, default=None,
+                   help="reduced reference npz for --twist as-run (default tests/data/crosscheck_CASE.npz)")
     r.add_argument("-o", "--out", type=Path, default=None)
     q = sub.add_parser("compare", help="table and figure: reference vs rodphase")
     q.add_argument("case", choices=sorted(CASES))
@@ -529,7 +553,7 @@ def main(argv=None) -> int:
     if args.cmd == "rodphase":
         out = args.out or Path(f"/tmp/crosscheck_rodphase_{args.case}.npz")
         run_rodphase(args.case, args.contact, args.dt, args.twist, args.kick,
-                     args.rotational_damping, out)
+                     args.rotational_damping, out, args.end_bodies, args.kick_scale, args.reference)
         return 0
     if args.cmd == "compare":
         compare(args.case, DATA / f"crosscheck_{args.case}.npz",
