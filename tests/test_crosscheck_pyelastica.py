@@ -17,6 +17,7 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def runs():
     import crosscheck_pyelastica as cc
+
     from rodphase.rod import simulate
 
     sets = cc.rodphase_sets("solenoid", contact="example", dt="auto", rotation_damping="example")
@@ -36,6 +37,11 @@ def test_solenoid_before_buckling_matches_reference(runs):
         assert abs(np.interp(t, h["time"], h["writhe"])) < 0.01
 
 
+def onset(t, wr):
+    """First time |Wr| exceeds half a turn."""
+    return t[np.argmax(np.abs(wr) > 0.5)]
+
+
 def test_solenoid_final_state_matches_reference(runs):
     from rodphase import classify
 
@@ -45,7 +51,6 @@ def test_solenoid_final_state_matches_reference(runs):
     assert h["link"][-1] == pytest.approx(ref["link"][-1], abs=0.01)     # 11 turns, none escaped
     for points in (result.positions, ref["final_positions"]):
         assert classify.phase(classify.alignment(points, 0.025, rest_length=1.0)) == "solenoid"
-    onset = lambda t, wr: t[np.argmax(np.abs(wr) > 0.5)]
     # known gaps (docs/reproduction.md, cross-check): onset 2.4 s later, 0.9 turn more writhe
     assert abs(onset(h["time"], h["writhe"]) - onset(ref["time"], ref["writhe"])) < 4.0
     assert abs(h["writhe"][-1] - ref["writhe"][-1]) < 1.3
