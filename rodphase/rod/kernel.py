@@ -68,8 +68,8 @@ F_SETTLE_DISTANCE = 24  # m: the mean shape settled if no surface point moved mo
 F_NEAR_SKIN = 25  # m: gap below which a candidate pair enters the short (near) contact list
 F_BODY_RADIUS = 26  # m: radius of the end bodies (I_START_BODY, I_END_BODY)
 F_PROBE_SIZE = 27  # m: largest node displacement of the stability probe
-F_PROBE_RETURN = 28  # stable once back within this fraction of the probe size of the equilibrium
-F_PROBE_LEAVE = 29  # left the equilibrium once this many probe sizes away from it
+F_PROBE_RETURN = 28  # stable once the probe's component along its shape has decayed below this fraction
+F_PROBE_LEAVE = 29  # unstable once that component, or any node's distance, grows past this many probes
 N_FLOATS = 30
 
 # control tables
@@ -469,7 +469,7 @@ def advance(x, v, Q, w, t_start, n_steps,
     ints[I_HISTORY_EVERY] steps and at the end; H must be ≥ n_steps // every + 2.
     probe_shape (3, n+1), largest row norm 1 and zero on held components, is the direction of
     the stability probe (ints[I_PROBE]): a candidate equilibrium of a hold is displaced by
-    floats[F_PROBE_SIZE] along it, and the hold ends only once the rod has come back to it.
+    floats[F_PROBE_SIZE] along it, and the hold ends only once that displacement has decayed.
     Returns (status, steps_taken, t_end, rows_written); info (N_INFO,) gets diagnostics.
     """
     n = rest_length.shape[0]

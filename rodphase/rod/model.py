@@ -208,8 +208,9 @@ class Solver:
     settle_scale: float | None = None  # m; None = the rod's rest length (as the kinetic test)
     speed_limit: float | None = None  # m/s; None = the axial wave speed
     # Stability probe of a hold's equilibrium (see kernel.advance): displace the candidate by
-    # probe_size rest radii (seeded smooth lateral shape, probe_seed) and accept it only if
-    # the rod returns within probe_return of that size; probe_leave sizes away means it left.
+    # probe_size rest radii (seeded smooth lateral shape, probe_seed) and accept it only once
+    # the displacement along that shape has decayed below probe_return of the probe; grown
+    # past probe_leave probes means the rod left an unstable equilibrium.
     stability_probe: bool = False
     probe_size: float = 0.1
     probe_return: float = 0.1
