@@ -650,3 +650,22 @@ def test_a_hold_that_runs_out_of_time_says_which_test_failed_and_by_how_much():
     assert result.status == "not_converged"
     assert "residual force" in result.message and "needs < 1e-06" in result.message
     assert "window" in result.message and "solver.hold_max_time" in result.message
+
+
+def test_a_fixed_dt_above_the_bound_is_named_not_blamed_on_resolution():
+    # drag off (else the run is refused up front): a solver.dt 10x the bound blows up in some
+    # guard; the message names solver.dt and the guard is "time_step", so a sweep with
+    # refine_up_to does not rerun the rod at 2n, 4n, ... elements.
+    from rodphase.sweep import run_scene
+
+    cfg = C.load_scene("twist_under_load", [("rod.elements", 16), ("solver.quadratic_drag", 0),
+                                            ("solver.refine_up_to", 64)], SCENES)
+    rod = build(cfg).rod
+    bound = stable_time_step(rod, build(cfg).contact)
+    scene = C.apply_overrides(cfg.plain(), [("solver.dt", 10 * bound)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = run_scene(scene)
+    assert result.status == "unstable"
+    assert result.diagnostics["guard"] == "time_step" and "solver.dt" in result.message
+    assert "refined_from" not in result.diagnostics and result.diagnostics["elements"] == 16

@@ -445,6 +445,13 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                                "loading.twist_rate (turns/s).",
             }.get(code, "Try a smaller solver.dt or solver.safety, more solver.damping, or a "
                         "stiffer contact.stiffness.")
+            if problem.solver.dt is not None and dt > bound:
+                # an explicit step above its bound blows up in whatever guard it meets first
+                # (often the 135° one): name the step, and do not let a sweep refine the rod
+                guard = "time_step"
+                advice = (f"solver.dt = {dt:.3g} s is {dt / bound:.3g} times the stable bound "
+                          f"{bound:.3g} s for {n} elements: use solver.dt: auto or a dt below "
+                          "the bound.")
             message = (f"unstable in {label} at t = {t_end:.4g} s: {guard_words} at {unit} "
                        f"{where} (value {info[k.D_VALUE]:.3g}); dt = {dt:.3g} s, stable bound "
                        f"{bound:.3g} s. {advice}")
