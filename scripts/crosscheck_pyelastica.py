@@ -449,7 +449,7 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
     t_end = min(ref["time"][-1], rp["time"][-1])
     t0, tt = c["time_start_twist"], c["time_twist"]
     times = sorted({t0 + f * tt for f in (0.25, 0.5, 0.75, 1.0)} | {t0 + tt + 10.0, t0 + tt + 25.0, t_end})
-    times = [t for t in times if t <= t_end + 1e-9]
+    times = sorted({round(t, 1) for t in times if t <= t_end + 1e-9})
     lines = [f"### {case}: PyElastica 1.0 (reference) vs rodphase", "",
              f"rodphase: {pi['status']}, twist {pi['twist']}, kick {pi['kick']}, dt = {pi['dt']:.3g} s; "
              f"reference: {'finished' if ri.get('finished') else 'NOT finished'}", "",
@@ -478,7 +478,7 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
               f"- final alignment / phase: reference {al_r:.3f} ({classify.phase(al_r)}), "
               f"rodphase {al_p:.3f} ({classify.phase(al_p)})",
               f"- CPU time: reference {ri.get('cpu_time', math.nan):.0f} s "
-              f"({ri['settings']['total_steps'] if 'total_steps' in ri['settings'] else ''} steps, "
+              f"({ri['steps']} steps to t = {ri['settings']['final_time']:g} s, "
               f"PyElastica 1.0), rodphase {pi['cpu_time']:.1f} s ({pi['steps']} steps, "
               f"{pi['us_per_step']:.1f} us/step); machine: {ri['machine']['cpu']}"]
     text = "\n".join(lines)
