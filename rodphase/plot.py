@@ -25,7 +25,7 @@ from matplotlib.lines import Line2D
 from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-from .result import RunResult
+from .result import RunResult, rotation_put_in
 
 DPI = 200
 STYLE = {
@@ -220,7 +220,7 @@ def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: floa
     if not all(v and np.isfinite(v) for v in (rest_radius, rest_length)):
         raise ValueError("topology_curves needs rest_radius and rest_length (m) to compute "
                          "Φa; pass them for a plain history dict")
-    turned = np.asarray(history["end_rotation"]) - np.asarray(history.get("start_rotation", 0.0))
+    turned = rotation_put_in(history)
     phi_a = turned * rest_radius / rest_length
 
     with matplotlib.rc_context(STYLE):
@@ -297,7 +297,7 @@ def hat_curve(result: RunResult, path, *, title: str | None = None) -> Path:
     from .theory import greenhill_clamped_moment, long_rod_buckling_moment
 
     h, d = result.history, result.diagnostics
-    turns = (np.asarray(h["end_rotation"]) - np.asarray(h.get("start_rotation", 0.0))) / (2 * np.pi)
+    turns = rotation_put_in(h) / (2 * np.pi)
     length, radius = d["rest_length"], d["rest_radius"]
     extension = 1.0 + np.asarray(h["end_displacement"]) / length
     force = float(np.max(h["applied_force"]))

@@ -29,6 +29,14 @@ HISTORY_COLUMNS = (
 )
 
 
+def rotation_put_in(history: dict) -> np.ndarray:
+    """(S,) rotation [rad] the two clamps have put in at each history row: end rotation minus
+    start rotation (0 for a history recorded before the start rotation was). Φa = this × a0/L0;
+    turns = this / 2π."""
+    start = history.get("start_rotation", 0.0)
+    return np.asarray(history["end_rotation"]) - np.asarray(start)
+
+
 @dataclass
 class RunResult:
     """One run. Arrays are (N, 3) per point, SI units.

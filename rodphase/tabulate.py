@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 
 from .classify import alignment, phase
+from .result import rotation_put_in
 
 
 def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5) -> dict:
@@ -26,8 +27,7 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     row["end_rotation_turns"] = float(h["end_rotation"][-1] / (2 * np.pi))
     # twist density with rest length and radius, and of the straight stretched rod
     # (L = e L0, a = a0/√e, e from the applied load): papers use either
-    turned = h["end_rotation"][-1] - (h["start_rotation"][-1] if "start_rotation" in h else 0.0)
-    row["phi_a_rest"] = float(turned * radius / rest_length)
+    row["phi_a_rest"] = float(rotation_put_in(h)[-1] * radius / rest_length)
     stiffness = d.get("youngs_modulus", np.nan) * np.pi * radius**2
     e_load = 1.0 / (1.0 - float(h["applied_force"][-1]) / stiffness)
     row["phi_a_current"] = row["phi_a_rest"] / e_load**1.5
@@ -59,7 +59,7 @@ def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
     d, h = result.diagnostics, result.history
     rest_length, radius = float(d["rest_length"]), float(d["rest_radius"])
     rows = np.arange(0, len(h["time"]), max(int(every), 1))
-    turned = h["end_rotation"] - h.get("start_rotation", 0.0)
+    turned = rotation_put_in(h)
     values = [alignment(result.snapshot_positions[i], radius, rest_length=rest_length,
                         epsilon=epsilon) for i in rows]
     table = pd.DataFrame({

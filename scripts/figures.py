@@ -30,6 +30,7 @@ import numpy as np
 
 from rodphase import __version__
 from rodphase import config as C
+from rodphase.result import rotation_put_in
 from rodphase.scenes import SCENES
 
 # figure → [(run id, scene, overrides)]
@@ -102,7 +103,7 @@ def scene_cfg(name: str, rid: str, sets: list):
 
 def phi_a(result) -> np.ndarray:
     d = result.diagnostics
-    return np.asarray(result.history["end_rotation"]) * d["rest_radius"] / d["rest_length"]
+    return rotation_put_in(result.history) * d["rest_radius"] / d["rest_length"]
 
 
 def stage_rows(result, label_start: str) -> np.ndarray:
@@ -684,7 +685,7 @@ def figureS3(results: dict, out: Path, sets: list) -> dict:
            [snapshot_at(r, max(int(i) - 1, 0), f"before escape {k + 1}") for k, i in enumerate(rows[:3])]
            + [snapshot_at(r, int(i), f"after escape {k + 1}") for k, i in enumerate(rows[:3])],
            ncols=max(2, min(len(rows), 3)))
-    turns = (h["end_rotation"][-1] - h["start_rotation"][-1]) / TURN
+    turns = rotation_put_in(h)[-1] / TURN
     return {"events": events, "turns_put_in": float(turns), "final_link": float(h["link"][-1]),
             "link_lost": float(turns - h["link"][-1]), "escape_count": len(events)}
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rodphase import plot as P
+from rodphase.result import rotation_put_in
 from rodphase.store import read_store
 from rodphase.theory import greenhill_clamped_moment, long_rod_buckling_moment
 
@@ -28,7 +29,7 @@ def measure(result) -> dict:
     h, d = result.history, result.diagnostics
     labels = [s["label"] for s in d["stages"]]
     stage = np.asarray(h["stage"])
-    turns = (h["end_rotation"] - h["start_rotation"]) / (2 * np.pi)
+    turns = rotation_put_in(h) / (2 * np.pi)
     z = h["end_displacement"] + d["rest_length"]
     torque, writhe = h["end_torque"], h["writhe"]
     force = float(np.max(h["applied_force"]))

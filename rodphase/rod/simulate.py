@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from ..result import HISTORY_COLUMNS, RunResult
+from ..result import HISTORY_COLUMNS, RunResult, rotation_put_in
 from . import kernel as k
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
@@ -216,7 +216,7 @@ LINK_TOLERANCE = 0.05
 def link_escapes(history: dict) -> np.ndarray:
     """Per history row, the link (turns) that left or entered the rod since the row before,
     beyond what the two clamps put in; 0 where nothing escaped. Needs both frames held."""
-    turns_in = (history["end_rotation"] - history["start_rotation"]) / (2 * np.pi)
+    turns_in = rotation_put_in(history) / (2 * np.pi)
     surplus = np.diff(history["link"] - turns_in, prepend=history["link"][:1] - turns_in[:1])
     return np.where(np.abs(surplus) > ESCAPE_THRESHOLD, surplus, 0.0)
 
@@ -491,7 +491,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
                 notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
                              + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
                                          for e in events) + ")")
-            turns_in = (history["end_rotation"] - history["start_rotation"]) / (2 * np.pi)
+            turns_in = rotation_put_in(history) / (2 * np.pi)
             unaccounted = float(np.max(np.abs(history["link"] - turns_in - np.cumsum(escapes))))
             if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
                 status, guard = "unstable", "link"
