@@ -294,17 +294,15 @@ def hat_curve(result: RunResult, path, *, title: str | None = None) -> Path:
     force, one colour per protocol stage (up, down, back), with the buckling moments of the
     straight rod (clamped Greenhill, and 2√(BF) of a long rod) for the stretched rod
     (B/e², length e·L0 of the incompressible law)."""
-    from .theory import greenhill_clamped_moment, long_rod_buckling_moment
+    from .theory import stretched_rod_buckling_moments
 
     h, d = result.history, result.diagnostics
     turns = rotation_put_in(h) / (2 * np.pi)
     length, radius = d["rest_length"], d["rest_radius"]
     extension = 1.0 + np.asarray(h["end_displacement"]) / length
     force = float(np.max(h["applied_force"]))
-    bending = d["youngs_modulus"] * np.pi * radius**4 / 4.0
-    e = 1.0 / (1.0 - force / (d["youngs_modulus"] * np.pi * radius**2))
-    greenhill = greenhill_clamped_moment(force, e * length, bending / e**2)
-    long_rod = long_rod_buckling_moment(force, bending / e**2)
+    _, greenhill, long_rod = stretched_rod_buckling_moments(force, d["youngs_modulus"], radius,
+                                                            length)
     labels = [s["label"] for s in d.get("stages", [])]
     stage = np.asarray(h["stage"])
     colours = [BLACK, BLUE, VERMILLION, "0.5"]

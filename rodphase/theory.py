@@ -33,6 +33,18 @@ def greenhill_clamped_moment(tension: float, length: float, bending: float) -> f
     raise ValueError(f"no clamped Greenhill root for T = {tension:g} N, L = {length:g} m")
 
 
+def stretched_rod_buckling_moments(force: float, youngs_modulus: float, radius: float,
+                                   length: float) -> tuple[float, float, float]:
+    """(e, clamped Greenhill M_c, 2√(B·F)) for the incompressible rod of rest radius `radius`
+    and rest length `length` stretched by an axial force: e = 1/(1 − F/(E·A0)), and the
+    straight stretched rod has length e·L0 and bending stiffness B/e² (I = I0/e²)."""
+    area = math.pi * radius**2
+    bending = youngs_modulus * math.pi * radius**4 / 4.0
+    e = 1.0 / (1.0 - force / (youngs_modulus * area))
+    return (e, greenhill_clamped_moment(force, e * length, bending / e**2),
+            long_rod_buckling_moment(force, bending / e**2))
+
+
 def long_rod_buckling_moment(tension: float, bending: float) -> float:
     """M_c = 2√(B·T) [N m], the buckling moment of a long rod under tension."""
     return 2.0 * math.sqrt(bending * tension)

@@ -20,7 +20,7 @@ import numpy as np
 from rodphase import plot as P
 from rodphase.result import rotation_put_in
 from rodphase.store import read_store
-from rodphase.theory import greenhill_clamped_moment, long_rod_buckling_moment
+from rodphase.theory import stretched_rod_buckling_moments
 
 WRITHE_BUCKLED = 0.2  # turns: above it the rod has left the straight branch
 
@@ -34,8 +34,7 @@ def measure(result) -> dict:
     torque, writhe = h["end_torque"], h["writhe"]
     force = float(np.max(h["applied_force"]))
     radius, length, young = d["rest_radius"], d["rest_length"], d["youngs_modulus"]
-    bending = young * np.pi * radius**4 / 4
-    e = 1 / (1 - force / (young * np.pi * radius**2))
+    e, greenhill, two_sqrt_bf = stretched_rod_buckling_moments(force, young, radius, length)
     up = np.flatnonzero(stage == labels.index("up"))
     down = np.flatnonzero(stage == labels.index("down"))
     # buckling: the torque peak before the rod first leaves the straight branch (a post-
@@ -50,10 +49,9 @@ def measure(result) -> dict:
     going_down = down[turns[down] > 0]
     straight_again = going_down[writhe[going_down] < WRITHE_BUCKLED]
     return {
-        "force_N": force, "force_FC": force / (np.pi**2 * bending / length**2), "extension": e,
+        "force_N": force, "force_FC": force / (np.pi**2 * young * np.pi * radius**4 / 4 / length**2), "extension": e,
         "buckling_torque": float(abs(torque[peak])),
-        "greenhill": greenhill_clamped_moment(force, e * length, bending / e**2),
-        "two_sqrt_BF": long_rod_buckling_moment(force, bending / e**2),
+        "greenhill": greenhill, "two_sqrt_BF": two_sqrt_bf,
         "buckling_turns": float(turns[peak]),
         "jump_m": float(z[peak] - z[after].min()) if len(after) else np.nan,
         "plateau_torque": plateau, "slope_m_per_turn": float(slope),
