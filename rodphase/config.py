@@ -408,9 +408,11 @@ class _StrictLoader(yaml.SafeLoader):
 
 def _no_octal(loader, node):
     if re.fullmatch(r"[-+]?0[0-9_]+", node.value):
+        sign = node.value[0] if node.value[0] in "+-" else ""
+        digits = node.value.lstrip("+-").lstrip("0_") or "0"
         raise yaml.constructor.ConstructorError(
-            None, None, f"{node.value} has a leading zero (YAML 1.1 reads it as octal); write "
-            f"{node.value.lstrip('+-0_') or '0'}", node.start_mark)
+            None, None, f"{node.value}: integers with leading zeros are octal in YAML 1.1 "
+            f"(020 is 16); write {sign}{digits}", node.start_mark)
     return yaml.SafeLoader.construct_yaml_int(loader, node)
 
 
@@ -432,9 +434,6 @@ def parse_override(item: str) -> tuple[str, Any]:
     key = key.strip()
     if not key or any(not part for part in key.split(".")):
         raise ConfigError("--set", item, "key.path=value, e.g. rod.elements=60")
-    if re.fullmatch(r"[-+]?0[0-9_]+", value.strip()):
-        # YAML 1.1 (PyYAML) reads 020 as the octal 16
-        raise ConfigError(key, value, "a number without leading zeros (YAML reads 020 as octal 16)")
     try:
         parsed = _yaml(value)
     except yaml.YAMLError as exc:
