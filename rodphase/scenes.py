@@ -79,21 +79,21 @@ def hold_stage(cfg, controls: Controls, label="hold") -> Stage:
                  controls=controls)
 
 
-def _with_gravity(cfg, stages) -> tuple[Stage, ...]:
-    """physics.gravity acts in every stage, whatever controls the stage builds."""
-    gravity = tuple(cfg.physics.gravity)
-    return tuple(s if s.controls is None else
-                 dataclasses.replace(s, controls=dataclasses.replace(s.controls, gravity=gravity))
-                 for s in stages)
-
-
 def _problem(cfg, rod, state, stages, ends=None, rest_curvature=None, force_scale=None) -> Problem:
-    gravity = tuple(cfg.physics.gravity)
-    stages = _with_gravity(cfg, stages)
     return Problem(rod=rod, state=state, ends=ends or ends_from(cfg), contact=contact_from(cfg),
                    solver=solver_from(cfg), stages=tuple(stages), name=cfg.scene,
-                   controls=Controls(gravity=gravity), rest_curvature=rest_curvature,
-                   force_scale=force_scale)
+                   rest_curvature=rest_curvature, force_scale=force_scale)
+
+
+def _with_gravity(cfg, problem: Problem) -> Problem:
+    """physics.gravity acts in every stage, whatever controls the scene built for it."""
+    gravity = tuple(cfg.physics.gravity)
+    problem.controls = dataclasses.replace(problem.controls, gravity=gravity)
+    problem.stages = tuple(
+        s if s.controls is None else
+        dataclasses.replace(s, controls=dataclasses.replace(s.controls, gravity=gravity))
+        for s in problem.stages)
+    return problem
 
 
 def twist_stages(cfg, force: float, turns_from: float, turns_to: float, label="twist",
@@ -142,13 +142,13 @@ def solenoid_loss(cfg) -> Problem:
     pull = Stage(duration, label="pull", ends=pull_ends, controls=Controls(
         end_rotation=ramp(0, duration, TURN * turns, TURN * final),
         end_displacement=ramp(0, duration, 0, p.distance)))
-    base.stages = _with_gravity(cfg, base.stages + (pull,))
+    base.stages = base.stages + (pull,)
     if p.release:
         # a stage with its own clock holds the end where it finds it: move it back by distance
         release = Stage(duration, label="release", ends=pull_ends, controls=Controls(
             end_rotation=ramp(0, duration, TURN * final, TURN * turns),
             end_displacement=ramp(0, duration, 0, -p.distance)))
-        base.stages = _with_gravity(cfg, base.stages + (release,))
+        base.stages = base.stages + (release,)
     base.force_scale = max(force, rod_from(cfg).buckling_force)
     return base
 
@@ -163,8 +163,8 @@ def stiffening(cfg) -> Problem:
                     stiffness=ramp(0, t, 1.0, cfg.stiffen.factor))
     settled = Controls(end_force=constant(force), end_rotation=constant(TURN * turns),
                        stiffness=constant(cfg.stiffen.factor))
-    base.stages = _with_gravity(cfg, base.stages + (Stage(t, label="stiffen", controls=grow),
-                                                    hold_stage(cfg, settled, "hold stiff")))
+    base.stages = base.stages + (Stage(t, label="stiffen", controls=grow),
+                                 hold_stage(cfg, settled, "hold stiff"))
     return base
 
 
@@ -317,4 +317,4 @@ def build(cfg, **kwargs) -> Problem:
         builder = SCENES[cfg.scene]
     except KeyError:
         raise C.ConfigError("scene", cfg.scene, "one of " + ", ".join(sorted(SCENES))) from None
-    return builder(cfg, **kwargs)
+    return _with_gravity(cfg, builder(cfg, **kwargs))
