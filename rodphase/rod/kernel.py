@@ -102,6 +102,10 @@ H_CONTACT_ENERGY = 14
 H_START_ROTATION = 15  # rad, the start rotation control
 N_HISTORY = 16
 
+# cos 135°: neighbouring frames (and an end frame and its clamp) turned further apart than
+# this bring the matrix log near its branch cut at 180°, where twist would silently wrap
+COS_MAX_TURN = -0.7071
+
 # status codes
 S_COMPLETED = 0
 S_EQUILIBRIUM = 1
@@ -614,7 +618,7 @@ def advance(x, v, Q, w, t_start, n_steps,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                        f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
                        force, torque, dilatation, lengths, energies, work)
-        if energies[2] < -0.7071:
+        if energies[2] < COS_MAX_TURN:
             # beyond 135° between neighbours the matrix log nears its branch cut at 180°,
             # where twist would silently wrap and link be lost: stop and say so
             status = S_RESOLUTION
@@ -635,7 +639,7 @@ def advance(x, v, Q, w, t_start, n_steps,
             for c in range(3):
                 torque[c, 0] += couple[3 + c] - couple[c]
             energies[1] += couple[6]
-            if couple[7] < -0.7071:
+            if couple[7] < COS_MAX_TURN:
                 # the clamp spring's log would wrap past 180° and twist the rod the wrong way
                 status = S_CLAMP_LAG
                 info[D_WHERE] = 0
@@ -654,7 +658,7 @@ def advance(x, v, Q, w, t_start, n_steps,
                 clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
                                  + Q[2, c, n - 1] * couple[2]) * axis[c]
             energies[1] += couple[6]
-            if couple[7] < -0.7071:
+            if couple[7] < COS_MAX_TURN:
                 status = S_CLAMP_LAG
                 info[D_WHERE] = n - 1
                 info[D_VALUE] = np.arccos(max(couple[7], -1.0))
