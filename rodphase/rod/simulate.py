@@ -243,7 +243,7 @@ def _unmet_criteria(solver, floats, info) -> str:
         motion = info[k.D_SETTLE_MOTION]
         if not np.isfinite(motion):
             failed.append(f"the shape had no two full {window:g} s windows to compare")
-        else:
+        elif motion >= floats[k.F_SETTLE_DISTANCE]:
             failed.append(f"the window-mean shape moved {1e3 * motion:.3g} mm per {window:g} s "
                           f"(needs < {1e3 * floats[k.F_SETTLE_DISTANCE]:.3g} mm)")
     undecided = int(info[k.D_PROBES] - info[k.D_PROBES_LEFT])
