@@ -229,6 +229,17 @@ def current_radii(rest_radius: float, incompressible: bool, rest_lengths: np.nda
     return rest_radius * radius_factor * thinning
 
 
+def _stage_entry(label: str, steps: int, end_time: float, code: int, info: np.ndarray) -> dict:
+    """One stage's report (diagnostics["stages"]) from the kernel's status code and info."""
+    return {"label": label, "steps": int(steps), "end_time": float(end_time),
+            "equilibrium": code == k.S_EQUILIBRIUM,
+            "settled": bool(code == k.S_EQUILIBRIUM and info[k.D_SETTLED]),
+            "residual": float(info[k.D_RESIDUAL]),
+            "probes": int(info[k.D_PROBES]),
+            "probes_left": int(info[k.D_PROBES_LEFT]),
+            "settle_motion": float(info[k.D_SETTLE_MOTION])}
+
+
 def _unmet_criteria(solver, floats, info) -> str:
     """Which of the hold's equilibrium tests failed at its end, each with value and threshold."""
     tol = solver.tolerance
@@ -391,10 +402,10 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
             # in the report so that stage indices and labels stay aligned
             stage_ends.append(sum(len(r) for r in rows_h) - 1)
             stage_states.append((state.positions, state.directors))
-            stage_report.append({"label": stage.label or f"stage {index}", "steps": 0,
-                                 "end_time": float(state.time), "equilibrium": False,
-                                 "settled": False, "residual": float("nan"), "probes": 0,
-                                 "probes_left": 0, "settle_motion": float("nan")})
+            nothing = np.zeros(k.N_INFO)
+            nothing[[k.D_RESIDUAL, k.D_SETTLE_MOTION]] = np.nan
+            stage_report.append(_stage_entry(stage.label or f"stage {index}", 0, state.time,
+                                             k.S_COMPLETED, nothing))
             continue
         n_steps = min(n_steps, budget - steps_total)
         if n_steps <= 0:
@@ -426,13 +437,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         stage_ends.append(sum(len(r) for r in rows_h) - 1)
         stage_states.append((state.positions, state.directors))
         label = stage.label or f"stage {index}"
-        stage_report.append({"label": label, "steps": int(steps), "end_time": float(t_end),
-                             "equilibrium": code == k.S_EQUILIBRIUM,
-                             "settled": bool(code == k.S_EQUILIBRIUM and info[k.D_SETTLED]),
-                             "residual": float(info[k.D_RESIDUAL]),
-                             "probes": int(info[k.D_PROBES]),
-                             "probes_left": int(info[k.D_PROBES_LEFT]),
-                             "settle_motion": float(info[k.D_SETTLE_MOTION])})
+        stage_report.append(_stage_entry(label, steps, t_end, code, info))
         if code in _GUARDS:
             status = "unstable"
             guard, guard_words = _GUARDS[code]
