@@ -48,7 +48,7 @@ class Rod:
     # solid isotropic cylinders (e.g. the helical buckling benchmark's B, C, S): bending
     # B = EI [N m²], twist C = GJ [N m²], shear 4GA/3 [N], axial EA [N]. The radius then only
     # sets mass, inertia and contact.
-    bend_stiffness: float | None = None
+    bend_stiffness_given: float | None = None
     twist_stiffness_given: float | None = None
     shear_stiffness_given: float | None = None
     axial_stiffness_given: float | None = None
@@ -67,8 +67,8 @@ class Rod:
 
     @property
     def bending_stiffness(self) -> float:
-        if self.bend_stiffness is not None:
-            return self.bend_stiffness
+        if self.bend_stiffness_given is not None:
+            return self.bend_stiffness_given
         return self.youngs_modulus * self.second_moment
 
     @property
