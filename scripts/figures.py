@@ -678,7 +678,8 @@ def figureS3(results: dict, out: Path, sets: list) -> dict:
     h = r.history
     jumps = link_escapes(h)
     rows = np.flatnonzero(jumps)
-    events = [{"time": float(h["time"][i]), "phi_a": float(phi_a(r)[i]),
+    phi = phi_a(r)
+    events = [{"time": float(h["time"][i]), "phi_a": float(phi[i]),
                "delta_link": float(jumps[i])} for i in rows]
     P.topology_curves(r, out / "figS3.png", title="Fig S3: a loop slips over the sliding end")
     shapes(out / "figS3_shape.png",
