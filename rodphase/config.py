@@ -511,19 +511,37 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
     raw = apply_overrides(data["sweep"] or {}, sweep_over)
     sweep = validate_sweep(raw)
     scene_raw = read_yaml(resolve_scene_path(sweep.scene, path.parent))
+    # a value the user set for a control that an axis sets for every sample would be
+    # replaced without a word: refuse it (the scene file's own value is the base the axis
+    # replaces, as intended)
+    for origin, items in (("sweep.set.", list(sweep["set"].items())), ("--set ", scene_over)):
+        for key, value in items:
+            axis = next((a for a in sweep.axes if key in _axis_controls(a)), None)
+            if axis is not None:
+                raise ConfigError(f"{origin}{key}", value,
+                                  f"a key that no sweep axis sets: the axis '{axis}' gives "
+                                  f"{AXES[axis][1]} its value in every sample")
     scene_raw = apply_overrides(scene_raw, list(sweep["set"].items()))
     scene_raw = apply_overrides(scene_raw, scene_over)
     for axis in sweep.axes:
         # the axis replaces whatever the scene said about the same control
-        section, key = AXES[axis][1].split(".")
+        section = AXES[axis][1].split(".")[0]
         scene_raw.setdefault(section, {})
-        for other in {"twist_density": ("twist_turns", "twist_density_current"),
-                      "twist_density_current": ("twist_turns", "twist_density"),
-                      "extension": ("force", "force_multiple"),
-                      "force_multiple": ("force", "extension")}[axis]:
-            scene_raw[section].pop(other, None)
+        for other in _axis_controls(axis):
+            if other != AXES[axis][1]:
+                scene_raw[section].pop(other.split(".")[1], None)
     scene = validate_scene(scene_raw, registered)
     return sweep, scene
+
+
+def _axis_controls(axis: str) -> tuple[str, ...]:
+    """The scene keys that set the same control as a sweep axis (its own key first)."""
+    section = AXES[axis][1].split(".")[0]
+    others = {"twist_density": ("twist_turns", "twist_density_current"),
+              "twist_density_current": ("twist_turns", "twist_density"),
+              "extension": ("force", "force_multiple"),
+              "force_multiple": ("force", "extension")}[axis]
+    return (AXES[axis][1],) + tuple(f"{section}.{k}" for k in others)
 
 
 def validate_sweep(raw: Any) -> Frozen:
