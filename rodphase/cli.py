@@ -15,6 +15,9 @@ import click
 from . import __version__
 from . import config as C
 
+FORCE_HELP = ("Replace OUTPUT if it holds another config's results (it is replaced when the "
+              "first new run is stored, not before). With the same config it changes nothing: "
+              "finished runs are kept and skipped.")
 SET_HELP = ("Override any config value, repeatable: --set rod.elements=60 --set "
             "loading.twist_density=1.2 (sweep keys: --set sweep.samples=40). Units are the "
             "config's: m, s, Pa, N, turns/s.")
@@ -25,17 +28,15 @@ def reports_errors(func):
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        from .store import StoreMismatch
+        from .store import StoreError, StoreFull
 
         try:
             return func(*args, **kwargs)
-        except C.ConfigError as exc:
-            click.echo(f"error: {exc}", err=True)
+        except StoreFull as exc:
+            click.echo(f"error: {exc}. Every run stored before is intact: free some space and "
+                       "run the same command to go on.", err=True)
             sys.exit(2)
-        except StoreMismatch as exc:
-            click.echo(f"error: {exc}", err=True)
-            sys.exit(2)
-        except (FileNotFoundError, KeyError) as exc:
+        except (C.ConfigError, StoreError, FileNotFoundError, KeyError) as exc:
             click.echo(f"error: {exc}", err=True)
             sys.exit(2)
 
@@ -44,13 +45,11 @@ def reports_errors(func):
 
 def _make_parent(output: str) -> None:
     # `-o out/run.h5` on a fresh checkout: make `out/` rather than fail in h5py/matplotlib
-    Path(output).parent.mkdir(parents=True, exist_ok=True)
-
-
-def _clear(output: str, force: bool) -> None:
-    _make_parent(output)
-    if force and Path(output).exists():
-        Path(output).unlink()
+    try:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise C.ConfigError("--output", output, f"a path whose folder exists or can be made "
+                            f"({exc.strerror}: {exc.filename})") from None
 
 
 def _overrides(items) -> list:
@@ -73,7 +72,7 @@ def main():
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
               help="HDF5 file to write (created, or resumed if it holds the same config).")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
-@click.option("--force", is_flag=True, help="Overwrite OUTPUT if it holds another config.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
 def run(scene, output, sets, force):
     """Run one SCENE (a YAML file or a shipped scene name, see `rodphase scenes`)."""
@@ -84,11 +83,13 @@ def run(scene, output, sets, force):
     from .sweep import run_scene
     from .tabulate import classify_store
 
-    _clear(output, force)
-    click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
-    result = run_scene(cfg.plain())
+    _make_parent(output)
+    # the output is opened (locked, its config checked) before simulating: a run that cannot
+    # be written is refused before it costs anything
     with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
-                    version=__version__, kind="run") as store:
+                    version=__version__, kind="run", replace=force) as store:
+        click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
+        result = run_scene(cfg.plain())
         store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
         table = classify_store(store)
     d = result.diagnostics
@@ -117,18 +118,31 @@ def run(scene, output, sets, force):
 @click.option("--retry-failed", is_flag=True, help="Run again the runs that failed before.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@click.option("--force", is_flag=True, help="Overwrite OUTPUT if it holds another config.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
 def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quiet, force):
-    """Run a sweep: sample the scene over its axes and simulate every sample."""
+    """Run a sweep: sample the scene over its axes and simulate every sample.
+
+    Every finished run is safe on disk as soon as it is counted: after Ctrl-C, SIGTERM, a
+    kill or a full disk, the same command goes on where the sweep stopped.
+    """
     from .scenes import SCENES
     from .sweep import run_sweep
 
     sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
-    _clear(output, force)
+    if scheduler and backend != "dask":
+        raise C.ConfigError("--scheduler", scheduler, "only with --backend dask")
+    _make_parent(output)
     report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
-                       scheduler=scheduler, retry_failed=retry_failed, progress=not quiet,
-                       echo=click.echo)
+                       scheduler=scheduler, retry_failed=retry_failed, replace=force,
+                       progress=not quiet, echo=click.echo)
+    if report.stopped_by:
+        import signal
+
+        click.echo(f"stopped by {report.stopped_by}: {report.done + report.failed} run(s) "
+                   f"finished and stored in {output} this time; run the same command to go "
+                   "on from there.", err=True)
+        sys.exit(128 + signal.Signals[report.stopped_by].value)
     by_status = Counter(status for _, status, _ in report.failures)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(by_status.items())) or "0 failed"
     compiled = f" (+ {report.compile_time:.1f} s compiling)" if report.compile_time else ""
@@ -154,16 +168,27 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
 @reports_errors
 def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     """Label every run of OUT.h5 by loop alignment and store the table back into it."""
-    from .store import edit_store, write_table_csv
-    from .tabulate import classify_store
+    from .store import StoreBusy, edit_store, read_store, write_table_csv
+    from .tabulate import classify_store, classify_table
 
-    with edit_store(store_file) as store:
+    thresholds = dict(epsilon=epsilon, plectoneme_below=plectoneme_below,
+                      solenoid_above=solenoid_above)
+    try:
+        store = edit_store(store_file)
+        busy = None
+    except StoreBusy as exc:
+        # a sweep is still writing it: classify what has finished, but leave the file to it
+        store, busy = read_store(store_file), exc
+    with store:
         if not store.run_ids():
             raise C.ConfigError(store_file, "no finished runs yet",
                                 "a store with at least one run (a sweep killed before its "
                                 "first run has none; run the same sweep command again)")
-        table = classify_store(store, epsilon=epsilon, plectoneme_below=plectoneme_below,
-                               solenoid_above=solenoid_above)
+        table = (classify_table(store, **thresholds) if busy else
+                 classify_store(store, **thresholds))
+    if busy:
+        click.echo(f"note: {busy}; the table below covers the runs finished so far and is not "
+                   "stored in the file (classify again when the sweep has ended)", err=True)
     counts = table["phase"].value_counts().to_dict()
     click.echo(f"{len(table)} runs: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     if csv_path:

@@ -1,19 +1,38 @@
-"""The HDF5 layout of rodphase results, all of it in this one module (plain h5py, no physics).
+"""The rodphase result store: its HDF5 layout and how it is written safely, all in this module.
 
-One file holds one sweep (or one run): the resolved config and its hash as file attributes,
-one group per finished run under /runs, and an optional per-run classification table under
-/classification. docs/data-format.md describes every name and unit so that the file can be
-read without rodphase.
+A store is one HDF5 file, OUT.h5, holding one sweep (or one run): the resolved config and its
+hash as file attributes, one group per finished run under /runs, and an optional per-run
+classification table under /classification. docs/data-format.md describes every name and
+unit so that the file can be read with h5py or pandas alone.
 
-Only the parent process writes. A run is written into /partial/<run_id> and moved to
-/runs/<run_id> when complete, then the file is flushed, so /runs never holds half a run and a
-killed sweep resumes from `done_ids()`.
+Crash safety rests on one rule: OUT.h5 is never modified in place.
+- A finished run goes into a small file of its own in the folder OUT.h5.parts/, written under
+  a temporary name, flushed to disk and renamed: when write_run returns, the run is durable,
+  whatever kills the process next.
+- Parts are merged into OUT.h5 by writing a new copy beside it and renaming it over the old one
+  (rename is atomic on POSIX file systems); then the merged parts are deleted. A new
+  classification table is stored the same way.
+So a kill at any instant (SIGKILL, OOM, power cut after the data reached the disk) leaves
+OUT.h5 whole, old or new, and every finished run in it or in a part. Readers see both and can
+follow a running sweep; the next writer merges what it finds. A full disk fails a write before
+the rename, so nothing already stored is touched.
+
+One writer per store, enforced here by an advisory lock on OUT.h5.lock (flock: the kernel
+drops it with the process, so a killed writer leaves no stale lock), independent of HDF5's
+own file locking, which clusters often switch off (HDF5_USE_FILE_LOCKING=FALSE).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import io
 import json
 import math
+import os
+import shutil
+import socket
+from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -21,19 +40,61 @@ import h5py
 import numpy as np
 import pandas as pd
 
+try:
+    import fcntl
+except ImportError:  # Windows: the lock falls back to a file created exclusively
+    fcntl = None
+
 from .result import RunResult
 
 FORMAT = "rodphase-store"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: runs arrive through OUT.h5.parts/; the file's own layout is that of 1
+READABLE_VERSIONS = (1, 2)
 KINDS = ("sweep", "run")
 FAILED = ("unstable", "not_converged")
-PARTIAL = "partial"  # runs being written live here until complete
 PARAM_PREFIX = "param_"
 TIMING_PREFIX = "timing_"
+PARTS_SUFFIX = ".parts"
+LOCK_SUFFIX = ".lock"
+# Parts are merged into the main file once this many have gathered (and when the writer
+# closes). Each merge copies the main file once, so a sweep of N runs copies it about
+# N / MERGE_EVERY times; between merges, readers open one small file per unmerged run.
+MERGE_EVERY = 200
+# what a write fails with when the disk, the quota or the file-size limit is reached
+_NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+_NO_SPACE_TEXT = ("No space left", "errno = 28", "Disk quota", "File too large", "errno = 27")
 
 
-class StoreMismatch(Exception):
+class StoreError(Exception):
+    """A store that cannot be used as asked; the message says why and what to do."""
+
+
+class StoreMismatch(StoreError):
     """The file exists but holds results of a different config."""
+
+
+class NotAStore(StoreMismatch):
+    """The file is not a rodphase store: not HDF5, HDF5 from another program, or a layout
+    that rodphase never writes (links, external storage, undecodable attributes)."""
+
+
+class StoreBusy(StoreError):
+    """Another process is writing this store."""
+
+
+class StoreFull(StoreError):
+    """The disk (or quota) is full: nothing already stored was touched."""
+
+
+# ----------------------------------------------------------------------------- small pieces
+
+def parts_folder(path) -> Path:
+    """Where finished runs wait to be merged into the store at `path`."""
+    return Path(f"{path}{PARTS_SUFFIX}")
+
+
+def lock_path(path) -> Path:
+    return Path(f"{path}{LOCK_SUFFIX}")
 
 
 def _json_default(value):
@@ -44,47 +105,233 @@ def _json_default(value):
                     "is not JSON-serialisable")
 
 
-def _plain(value):
-    """h5py attribute value → Python scalar (or list)."""
+def _plain(value, where: str = "attribute"):
+    """h5py attribute value → Python scalar (or list). Raises NotAStore for values rodphase
+    never writes (opaque bytes such as a pickle, text that is not UTF-8)."""
+    if isinstance(value, np.void) or (isinstance(value, np.ndarray) and value.dtype.kind == "V"):
+        raise NotAStore(f"{where} holds opaque binary data (rodphase writes only numbers and "
+                        "UTF-8 text): not a file written by rodphase")
     if isinstance(value, bytes):
-        return value.decode()
+        try:
+            return value.decode()
+        except UnicodeDecodeError:
+            raise NotAStore(f"{where} is not UTF-8 text: not a file written by rodphase") from None
     if isinstance(value, (np.generic, np.ndarray)):
         return value.tolist()
     return value
 
 
 def _check_id(run_id: str) -> str:
-    if not run_id or "/" in run_id or run_id in (".", ".."):
-        raise ValueError(f"run_id {run_id!r} cannot be an HDF5 group name: use a non-empty "
-                         "name without '/'")
+    if not run_id or "/" in run_id or run_id in (".", "..") or run_id.startswith("."):
+        raise ValueError(f"run_id {run_id!r} cannot be a run name: use a non-empty name "
+                         "without '/' that does not start with '.'")
     return run_id
 
 
-def _write_array(group: h5py.Group, name: str, data, *, per_snapshot: bool = False):
-    data = np.asarray(data)
-    if per_snapshot and data.size:
-        # one chunk per snapshot: a movie frame is one chunk read, and gzip pays off on
-        # slowly varying rods
-        group.create_dataset(name, data=data, chunks=(1,) + data.shape[1:],
-                             compression="gzip", compression_opts=4, shuffle=True)
-    else:
-        group.create_dataset(name, data=data)
+def _no_space(exc: BaseException) -> bool:
+    if isinstance(exc, OSError) and exc.errno in _NO_SPACE:
+        return True
+    return isinstance(exc, (OSError, RuntimeError)) and any(t in str(exc) for t in _NO_SPACE_TEXT)
 
 
-def _replace(parent: h5py.Group, source: str, target: str):
-    if target in parent:
-        del parent[target]
-    parent.move(source, target)
-    partial = parent.file[PARTIAL]
-    if not len(partial):  # keep the file tidy for readers: /partial only exists mid-write
-        del parent.file[PARTIAL]
+def _fsync(path: Path) -> None:
+    # a directory is fsynced so that the rename itself reaches the disk
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    except OSError as exc:  # some file systems refuse fsync on a directory
+        if exc.errno not in (errno.EINVAL, errno.EBADF):
+            raise
+    finally:
+        os.close(fd)
 
+
+def _temporary_name(target: Path) -> Path:
+    return target.with_name(f".{target.name}.{os.getpid()}.tmp")
+
+
+@contextlib.contextmanager
+def _written_aside(target: Path) -> Iterator[Path]:
+    """Yield a temporary path beside `target`; once the caller has written and closed it,
+    flush it to disk and rename it over `target`. On any failure the temporary file is
+    removed and `target` is as it was; a full disk becomes StoreFull."""
+    tmp = _temporary_name(target)
+    try:
+        yield tmp
+        _fsync(tmp)
+        os.replace(tmp, target)
+        _fsync(target.parent)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if _no_space(exc):
+            raise StoreFull(f"the disk is full (or a quota or file-size limit was reached) "
+                            f"writing {target}: {_short(exc)}") from None
+        raise
+
+
+def _short(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return text[:200]
+
+
+def _in_memory() -> h5py.File:
+    """A new HDF5 file built in memory (its bytes: `.id.get_file_image()` after flush).
+
+    HDF5 does not survive a full disk: a failed write of compressed chunks crashed the
+    process (segfault, double free) in tests on a full tmpfs. So rodphase never lets HDF5
+    write where the disk may run out: small files are built in memory and written out by
+    Python, whose errors are clean; large rewrites get their space reserved first."""
+    return h5py.File(io.BytesIO(), "w")
+
+
+def _write_image(file: h5py.File, target: Path) -> None:
+    """Write an in-memory HDF5 file to `target`, aside and renamed into place."""
+    file.flush()
+    image = file.id.get_file_image()
+    file.close()
+    with _written_aside(target) as tmp:
+        with open(tmp, "wb") as out:
+            out.write(image)
+
+
+def _reserve(path: Path, size: int) -> None:
+    """Allocate `size` bytes for `path` now, so that HDF5's later writes up to that size
+    cannot meet a full disk (HDF5 trims the file to its real end when it closes it)."""
+    if hasattr(os, "posix_fallocate"):
+        fd = os.open(path, os.O_RDWR)
+        try:
+            os.posix_fallocate(fd, 0, size)
+        finally:
+            os.close(fd)
+        return
+    with open(path, "r+b") as fh:  # macOS, Windows: write the zeros (a sparse seek reserves nothing)
+        fh.seek(0, os.SEEK_END)
+        while fh.tell() < size:
+            fh.write(bytes(min(1 << 20, size - fh.tell())))
+
+
+def _h5(path, mode: str) -> h5py.File:
+    # The main file is never written in place (see the module docstring), so HDF5's own
+    # locks add nothing and would make a reader fail while a sweep merges.
+    return h5py.File(path, mode, locking=False)
+
+
+def _check_layout(file: h5py.File, where: str) -> None:
+    """Refuse what rodphase never writes and what would make it read elsewhere on the disk:
+    soft and external links, external or virtual dataset storage."""
+    problems = []
+
+    def visit(name, link):
+        if isinstance(link, (h5py.ExternalLink, h5py.SoftLink)):
+            kind = "an external link" if isinstance(link, h5py.ExternalLink) else "a soft link"
+            problems.append(f"{name} is {kind}")
+            return 1  # stop at the first
+        obj = file.get(name)
+        if isinstance(obj, h5py.Dataset) and (obj.external or obj.is_virtual):
+            problems.append(f"{name} keeps its data outside the file")
+            return 1
+        return None
+
+    file.visititems_links(visit)
+    if problems:
+        raise NotAStore(f"{where}: {problems[0]}, which rodphase never writes: refusing to "
+                        "follow it (a file from elsewhere could make rodphase read other files)")
+
+
+# ----------------------------------------------------------------------------- writer lock
+
+def _holder() -> bytes:
+    since = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return f"pid {os.getpid()} on {socket.gethostname()} since {since}\n".encode()
+
+
+class _WriterLock:
+    """An advisory lock on OUT.h5.lock, held for as long as a writer has the store open."""
+
+    def __init__(self, store_path: Path):
+        self.store_path = store_path
+        self.path = lock_path(store_path)
+        self.fd: int | None = None
+
+    def acquire(self) -> _WriterLock:
+        if fcntl is None:
+            return self._acquire_exclusive()
+        while True:
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise StoreError(f"cannot write {self.store_path}: {exc.strerror} "
+                                 f"({self.path})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                with open(self.path, errors="replace") as fh:
+                    holder = fh.read(200).strip() or "unknown"
+                os.close(fd)
+                raise StoreBusy(f"{self.store_path} is being written by another rodphase "
+                                f"process ({holder}): wait until it ends, or write to another "
+                                "output") from None
+            except OSError as exc:
+                os.close(fd)
+                raise StoreError(f"cannot lock {self.path} ({exc.strerror}): this file system "
+                                 "offers no file locks; write the output to one that does "
+                                 "(a local or scratch disk)") from None
+            # the previous holder unlinks the file as it releases it: a lock taken on the
+            # unlinked file would not exclude the next process, so check it is still the file
+            try:
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, _holder())
+        self.fd = fd
+        return self
+
+    def _acquire_exclusive(self) -> _WriterLock:
+        # without flock a lock file outlives a killed writer: the message says so
+        try:
+            self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            holder = self.path.read_text(errors="replace").strip() or "unknown"
+            raise StoreBusy(f"{self.store_path} is being written by another rodphase process "
+                            f"({holder}); if that process no longer runs, delete "
+                            f"{self.path}") from None
+        os.write(self.fd, _holder())
+        return self
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+        os.close(self.fd)
+        self.fd = None
+
+
+# ----------------------------------------------------------------------------- the store
 
 class Store:
-    """An open rodphase HDF5 file. Use `open_store` (write) or `read_store` (read only)."""
+    """An open rodphase store: OUT.h5 and its unmerged parts, read as one.
 
-    def __init__(self, file: h5py.File):
-        self.file = file
+    Use `read_store` to read (safe while a sweep writes it), `open_store` to add runs, and
+    `edit_store` to store a classification; the last two take the store's writer lock."""
+
+    def __init__(self, path, *, lock: _WriterLock | None = None,
+                 new_attrs: dict | None = None, replace: bool = False):
+        self._path = Path(path)
+        self._lock = lock
+        self._new_attrs = new_attrs  # the file attributes a writer gives a new main file
+        self._replace = replace  # the main file holds another config: ignore it, replace it
+        self.file: h5py.File | None = None
+        self._parts: dict[str, Path] = {}
+        self._foreign_parts: list[Path] = []  # another config's, deleted when replacing
+        self._refresh()
+
+    # --- opening and closing -------------------------------------------------------------
 
     def __enter__(self):
         return self
@@ -93,101 +340,225 @@ class Store:
         self.close()
 
     def close(self) -> None:
-        if self.file.id.valid:
-            self.file.close()
+        """Close; a writer first merges its parts (if that fails, they stay, still durable)."""
+        try:
+            if self.writable:
+                self.merge()
+        finally:
+            self._close_main()
+            if self._lock is not None:
+                self._lock.release()
+                self._lock = None
 
     @property
     def path(self) -> Path:
-        return Path(self.file.filename)
+        return self._path
+
+    @property
+    def writable(self) -> bool:
+        return self._lock is not None and self._lock.fd is not None
 
     @property
     def attrs(self) -> dict:
         """File attributes: rodphase_version, kind, config_yaml, config_hash, created, ..."""
-        return {k: _plain(v) for k, v in self.file.attrs.items()}
+        if self.file is None:
+            return dict(self._new_attrs or {})
+        return {k: _plain(v, f"{self._path}: file attribute {k}") for k, v in self.file.attrs.items()}
+
+    def _close_main(self) -> None:
+        if self.file is not None and self.file.id.valid:
+            self.file.close()
+        self.file = None
+
+    def _refresh(self) -> None:
+        """(Re)open the main file and list the parts that belong to it."""
+        self._close_main()
+        if not self._replace and self._path.exists():
+            self.file = _open_main(self._path)
+        wanted = self.attrs.get("config_hash")
+        self._parts, self._foreign_parts = {}, []
+        folder = parts_folder(self._path)
+        if not folder.is_dir():
+            return
+        for part in sorted(folder.glob("*.h5")):
+            if part.name.startswith("."):
+                continue  # a temporary file: a run still being written (or a killed writer's)
+            try:
+                with _h5(part, "r") as f:
+                    _check_layout(f, str(part))
+                    held = _plain(f.attrs.get("config_hash"), f"{part}: config_hash")
+            except FileNotFoundError:
+                continue  # merged and deleted since the listing
+            except OSError as exc:
+                if self.writable:
+                    raise NotAStore(f"{part} cannot be read as HDF5 ({_short(exc)}): it is "
+                                    "not one of rodphase's run files; move it away") from None
+                continue
+            if held != wanted:
+                if self._replace:
+                    self._foreign_parts.append(part)
+                    continue
+                if self.writable:
+                    raise StoreMismatch(
+                        f"{folder} holds runs of another config (hash {held}, this config "
+                        f"{wanted}); use another output file, or --force to replace them")
+                continue  # a reader shows the runs of the main file's config only
+            self._parts[part.stem] = part
 
     # --- runs -----------------------------------------------------------------------------
 
-    def write_run(self, run_id: str, params: dict, result: RunResult, timings: dict) -> None:
-        """Write one run whole (replacing any earlier run of that id) and flush."""
-        _check_id(run_id)
-        diagnostics = json.dumps(result.diagnostics, default=_json_default)  # fail before writing
-        partial = self.file.require_group(PARTIAL)
-        if run_id in partial:  # left by a crash
-            del partial[run_id]
-        g = partial.create_group(run_id)
-
-        for name, value in params.items():
-            g.attrs[PARAM_PREFIX + name] = value
-        g.attrs["status"] = result.status
-        g.attrs["message"] = result.message
-        g.attrs["diagnostics"] = diagnostics
-        g.attrs["stage_ends"] = np.asarray(result.stage_ends, dtype=np.int64)
-        for name, value in timings.items():
-            g.attrs[TIMING_PREFIX + name] = (value if isinstance(value, (int, float, str, np.number))
-                                             else json.dumps(value, default=_json_default))
-        # wall time and steps as plain attributes: the table reads them for every run
-        diag = result.diagnostics
-        g.attrs["wall_time"] = float(timings.get("wall_time", diag.get("wall_time", math.nan)))
-        g.attrs["steps"] = int(timings.get("steps", diag.get("steps", -1)))
-
-        _write_array(g, "positions", result.positions)
-        _write_array(g, "directors", result.directors)
-        _write_array(g, "radii", result.radii)
-        _write_array(g, "rest_lengths", result.rest_lengths)
-        history = g.create_group("history", track_order=True)
-        for name, column in result.history.items():
-            _write_array(history, name, column)
-        history.attrs["columns"] = list(result.history)
-        snapshots = g.create_group("snapshots")
-        _write_array(snapshots, "positions", result.snapshot_positions, per_snapshot=True)
-        _write_array(snapshots, "d1", result.snapshot_d1, per_snapshot=True)
-
-        # the move is one link change: the run appears under its final name complete or not at all
-        _replace(self.file.require_group("runs"), f"/{PARTIAL}/{run_id}", run_id)
-        self.file.flush()
+    @contextlib.contextmanager
+    def _run_group(self, run_id: str) -> Iterator[h5py.Group]:
+        part = self._parts.get(run_id)
+        if part is not None:
+            try:
+                f = _h5(part, "r")
+            except FileNotFoundError:
+                f = None
+                self._refresh()  # merged by the writer since we listed it: it is in the main file
+            if f is not None:
+                with f:
+                    yield f["runs"][run_id]
+                return
+        runs = self.file["runs"] if self.file is not None else {}
+        if run_id not in runs:
+            raise KeyError(f"no run {run_id!r} in {self._path} ({len(self.run_ids())} runs "
+                           "stored)")
+        yield runs[run_id]
 
     def run_ids(self) -> list[str]:
-        return list(self.file["runs"]) if "runs" in self.file else []
+        merged = list(self.file["runs"]) if self.file is not None else []
+        return sorted(set(merged) | set(self._parts))
+
+    def _status(self, run_id: str) -> str:
+        with self._run_group(run_id) as g:
+            return _plain(g.attrs["status"], f"{self._path}: run {run_id} status")
 
     def done_ids(self, include_failed: bool = False) -> set[str]:
         """Runs to skip on resume: status "ok", and with include_failed also failed runs."""
         wanted = ("ok",) + (FAILED if include_failed else ())
-        runs = self.file.get("runs", {})
-        return {rid for rid in self.run_ids() if _plain(runs[rid].attrs["status"]) in wanted}
-
-    def _run(self, run_id: str) -> h5py.Group:
-        runs = self.file.get("runs", {})
-        if run_id not in runs:
-            raise KeyError(f"no run {run_id!r} in {self.path} ({len(runs)} runs stored)")
-        return runs[run_id]
+        return {rid for rid in self.run_ids() if self._status(rid) in wanted}
 
     def run_params(self, run_id: str) -> dict:
-        g = self._run(run_id)
-        return {k[len(PARAM_PREFIX):]: _plain(v) for k, v in g.attrs.items()
-                if k.startswith(PARAM_PREFIX)}
+        with self._run_group(run_id) as g:
+            return self._prefixed(g, run_id, PARAM_PREFIX)
 
     def run_timings(self, run_id: str) -> dict:
-        g = self._run(run_id)
-        return {k[len(TIMING_PREFIX):]: _plain(v) for k, v in g.attrs.items()
-                if k.startswith(TIMING_PREFIX)}
+        with self._run_group(run_id) as g:
+            return self._prefixed(g, run_id, TIMING_PREFIX)
+
+    def _prefixed(self, g: h5py.Group, run_id: str, prefix: str) -> dict:
+        return {k[len(prefix):]: _plain(v, f"{self._path}: run {run_id} attribute {k}")
+                for k, v in g.attrs.items() if k.startswith(prefix)}
 
     def read_run(self, run_id: str) -> RunResult:
-        g = self._run(run_id)
-        history = g["history"]
-        columns = [_plain(c) for c in history.attrs.get("columns", list(history))]
-        return RunResult(
-            status=_plain(g.attrs["status"]),
-            message=_plain(g.attrs["message"]),
-            positions=g["positions"][()],
-            directors=g["directors"][()],
-            radii=g["radii"][()],
-            rest_lengths=g["rest_lengths"][()],
-            history={name: history[name][()] for name in columns},
-            snapshot_positions=g["snapshots/positions"][()],
-            snapshot_d1=g["snapshots/d1"][()],
-            diagnostics=json.loads(_plain(g.attrs["diagnostics"])),
-            stage_ends=[int(i) for i in g.attrs["stage_ends"]],
-        )
+        with self._run_group(run_id) as g:
+            where = f"{self._path}: run {run_id}"
+            history = g["history"]
+            columns = [_plain(c, where) for c in history.attrs.get("columns", list(history))]
+            return RunResult(
+                status=_plain(g.attrs["status"], where),
+                message=_plain(g.attrs["message"], f"{where} message"),
+                positions=g["positions"][()],
+                directors=g["directors"][()],
+                radii=g["radii"][()],
+                rest_lengths=g["rest_lengths"][()],
+                history={name: history[name][()] for name in columns},
+                snapshot_positions=g["snapshots/positions"][()],
+                snapshot_d1=g["snapshots/d1"][()],
+                diagnostics=json.loads(_plain(g.attrs["diagnostics"], f"{where} diagnostics")),
+                stage_ends=[int(i) for i in g.attrs["stage_ends"]],
+            )
+
+    def write_run(self, run_id: str, params: dict, result: RunResult, timings: dict) -> None:
+        """Make one finished run durable (replacing any earlier run of that id): when this
+        returns, the run survives a kill of this process."""
+        self._need_writer()
+        _check_id(run_id)
+        diagnostics = json.dumps(result.diagnostics, default=_json_default)  # fail before writing
+        folder = parts_folder(self._path)
+        try:
+            folder.mkdir(exist_ok=True)
+        except OSError as exc:
+            if _no_space(exc):
+                raise StoreFull(f"the disk is full writing {folder}: {_short(exc)}") from None
+            raise
+        target = folder / f"{run_id}.h5"
+        f = _in_memory()
+        try:
+            f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION,
+                           config_hash=self.attrs["config_hash"])
+            _fill_run(f.create_group("runs").create_group(run_id), params, result, timings,
+                      diagnostics)
+            _write_image(f, target)
+        finally:
+            f.close()
+        self._parts[run_id] = target
+        if self._replace or len(self._parts) >= MERGE_EVERY:
+            # replacing another config's file: do it at the first run, not before (a sweep
+            # that fails before it has a run leaves the old file as it was)
+            self.merge()
+
+    def merge(self) -> None:
+        """Merge the parts into the main file: write a new main file beside it, rename it
+        over the old one, then delete the merged parts."""
+        self._need_writer()
+        if not self._parts and not self._replace and self.file is not None:
+            return
+        parts = dict(self._parts)
+        # a copied run takes about its part's size again (data and metadata); twice that
+        # leaves room for HDF5's own bookkeeping
+        growth = 2 * sum(p.stat().st_size for p in parts.values()) + (1 << 18)
+        try:
+            with self._rewritten(growth) as f:
+                runs = f.require_group("runs")
+                replaced = [rid for rid in parts if rid in runs]
+                for run_id in replaced:
+                    del runs[run_id]
+                for run_id, part in sorted(parts.items()):
+                    with _h5(part, "r") as src:
+                        f.copy(src["runs"][run_id], runs, name=run_id)
+                if replaced and "classification" in f:
+                    # a classification describes the runs it saw: rows of replaced runs go
+                    table = _read_classification(f["classification"])
+                    _write_classification(f, table[~table["run_id"].astype(str).isin(replaced)])
+        except BaseException:
+            self._refresh()
+            raise
+        self._replace = False
+        for part in list(parts.values()) + self._foreign_parts:
+            with contextlib.suppress(OSError):
+                part.unlink()
+        with contextlib.suppress(OSError):
+            parts_folder(self._path).rmdir()  # only if empty
+        self._refresh()
+
+    @contextlib.contextmanager
+    def _rewritten(self, growth: int) -> Iterator[h5py.File]:
+        """A writable copy of the main file (a new one when replacing), renamed over the main
+        file once the caller is done with it; `growth` bytes are reserved for what the caller
+        adds (see _in_memory for why)."""
+        copy_from = None if (self._replace or self.file is None) else self._path
+        self._close_main()
+        if copy_from is None:  # a new file: built in memory, written out whole
+            f = _in_memory()
+            try:
+                f.attrs.update(self._new_attrs)
+                f.create_group("runs")
+                yield f
+                _write_image(f, self._path)
+            finally:
+                f.close()
+            return
+        with _written_aside(self._path) as tmp:
+            shutil.copyfile(copy_from, tmp)
+            _reserve(tmp, tmp.stat().st_size + growth)
+            with _h5(tmp, "r+") as f:
+                yield f
+
+    def _need_writer(self) -> None:
+        if not self.writable:
+            raise StoreError(f"{self._path} is open for reading only")
 
     # --- tables ---------------------------------------------------------------------------
 
@@ -202,40 +573,32 @@ class Store:
         if "run_id" not in df.columns:
             raise ValueError(f"classification table needs a run_id column; it has "
                              f"{list(df.columns)}")
-        tmp = f"/{PARTIAL}/classification"
-        partial = self.file.require_group(PARTIAL)
-        if "classification" in partial:
-            del partial["classification"]
-        g = partial.create_group("classification", track_order=True)
-        for name in df.columns:
-            g.create_dataset(str(name), data=_column_array(df[name]))
-        g.attrs["columns"] = [str(c) for c in df.columns]
-        _replace(self.file, tmp, "classification")
-        self.file.flush()
+        self._need_writer()
+        self.merge()  # runs and the table that describes them in one file
+        try:
+            with self._rewritten(2 * int(df.memory_usage(deep=True).sum()) + (1 << 18)) as f:
+                _write_classification(f, df)
+        finally:
+            self._refresh()
 
     def classification(self) -> pd.DataFrame | None:
-        if "classification" not in self.file:
+        if self.file is None or "classification" not in self.file:
             return None
-        g = self.file["classification"]
-        columns = [_plain(c) for c in g.attrs.get("columns", list(g))]
-        data = {}
-        for name in columns:
-            ds = g[name]
-            data[name] = ds.asstr()[()] if h5py.check_string_dtype(ds.dtype) else ds[()]
-        return pd.DataFrame(data)
+        return _read_classification(self.file["classification"])
 
     def table(self) -> pd.DataFrame:
         """One row per run: run_id, params, status, message, wall_time, steps, and the
         classification columns if any (a column already present gets the suffix
         "_classified")."""
-        runs = self.file.get("runs", {})
         rows = []
         for rid in self.run_ids():
-            a = runs[rid].attrs
-            row = {"run_id": rid}
-            row.update(self.run_params(rid))
-            row.update(status=_plain(a["status"]), message=_plain(a["message"]),
-                       wall_time=float(a["wall_time"]), steps=int(a["steps"]))
+            with self._run_group(rid) as g:
+                a = g.attrs
+                where = f"{self._path}: run {rid}"
+                row = {"run_id": rid} | self._prefixed(g, rid, PARAM_PREFIX)
+                row.update(status=_plain(a["status"], where),
+                           message=_plain(a["message"], f"{where} message"),
+                           wall_time=float(a["wall_time"]), steps=int(a["steps"]))
             rows.append(row)
         table = pd.DataFrame(rows, columns=None if rows else
                              ["run_id", "status", "message", "wall_time", "steps"])
@@ -245,6 +608,66 @@ class Store:
             table = table.merge(classified, on="run_id", how="left",
                                 suffixes=("", "_classified"))
         return table
+
+
+# ----------------------------------------------------------------------------- layout
+
+def _write_array(group: h5py.Group, name: str, data, *, per_snapshot: bool = False):
+    data = np.asarray(data)
+    if per_snapshot and data.size:
+        # one chunk per snapshot: a movie frame is one chunk read, and gzip pays off on
+        # slowly varying rods
+        group.create_dataset(name, data=data, chunks=(1,) + data.shape[1:],
+                             compression="gzip", compression_opts=4, shuffle=True)
+    else:
+        group.create_dataset(name, data=data)
+
+
+def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
+              diagnostics: str) -> None:
+    for name, value in params.items():
+        g.attrs[PARAM_PREFIX + name] = value
+    g.attrs["status"] = result.status
+    g.attrs["message"] = result.message
+    g.attrs["diagnostics"] = diagnostics
+    g.attrs["stage_ends"] = np.asarray(result.stage_ends, dtype=np.int64)
+    for name, value in timings.items():
+        g.attrs[TIMING_PREFIX + name] = (value if isinstance(value, (int, float, str, np.number))
+                                         else json.dumps(value, default=_json_default))
+    # wall time and steps as plain attributes: the table reads them for every run
+    diag = result.diagnostics
+    g.attrs["wall_time"] = float(timings.get("wall_time", diag.get("wall_time", math.nan)))
+    g.attrs["steps"] = int(timings.get("steps", diag.get("steps", -1)))
+
+    _write_array(g, "positions", result.positions)
+    _write_array(g, "directors", result.directors)
+    _write_array(g, "radii", result.radii)
+    _write_array(g, "rest_lengths", result.rest_lengths)
+    history = g.create_group("history", track_order=True)
+    for name, column in result.history.items():
+        _write_array(history, name, column)
+    history.attrs["columns"] = list(result.history)
+    snapshots = g.create_group("snapshots")
+    _write_array(snapshots, "positions", result.snapshot_positions, per_snapshot=True)
+    _write_array(snapshots, "d1", result.snapshot_d1, per_snapshot=True)
+
+
+def _write_classification(f: h5py.File, df: pd.DataFrame) -> None:
+    if "classification" in f:
+        del f["classification"]
+    g = f.create_group("classification", track_order=True)
+    for name in df.columns:
+        g.create_dataset(str(name), data=_column_array(df[name]))
+    g.attrs["columns"] = [str(c) for c in df.columns]
+
+
+def _read_classification(g: h5py.Group) -> pd.DataFrame:
+    columns = [_plain(c, "classification columns") for c in g.attrs.get("columns", list(g))]
+    data = {}
+    for name in columns:
+        ds = g[name]
+        data[name] = ds.asstr()[()] if h5py.check_string_dtype(ds.dtype) else ds[()]
+    return pd.DataFrame(data)
 
 
 def _column_array(column: pd.Series) -> np.ndarray:
@@ -258,63 +681,119 @@ def _column_array(column: pd.Series) -> np.ndarray:
     return np.array(text, dtype=h5py.string_dtype())
 
 
-def open_store(path, *, config_text: str, config_hash: str, version: str, kind: str) -> Store:
-    """Create the store at `path`, or open it to add runs if it holds the same config.
+# ----------------------------------------------------------------------------- opening
 
-    Raises StoreMismatch if the file holds results of a config with another hash.
-    """
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    file = h5py.File(path, "a")
-    held = _plain(file.attrs.get("config_hash"))
-    if held is None and len(file):
-        file.close()
-        raise StoreMismatch(f"{path} is an HDF5 file but not a rodphase store (no config_hash "
-                            "attribute); use another output file or --force to overwrite it")
-    if held is not None and held != config_hash:
-        file.close()
-        raise StoreMismatch(f"{path} holds results of a different config (stored hash {held}, "
-                            f"this config {config_hash}); use another output file, or --force "
-                            "to overwrite it")
-    if held is None:
-        file.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, rodphase_version=version,
-                          kind=kind, config_yaml=config_text, config_hash=config_hash,
-                          created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
-        file.require_group("runs")
-    if PARTIAL in file:
-        # only one process writes a store: anything partial is left by a killed writer
-        del file[PARTIAL]
-    file.flush()
-    return Store(file)
-
-
-class NotAStore(StoreMismatch):
-    """The file is not a rodphase store: not HDF5 at all, or HDF5 from another program."""
-
-
-def read_store(path) -> Store:
-    """Open an existing store read-only; NotAStore if `path` is not a rodphase store."""
-    return _open_existing(path, "r")
-
-
-def edit_store(path) -> Store:
-    """Open an existing store to add its classification; NotAStore if it is not one."""
-    return _open_existing(path, "r+")
-
-
-def _open_existing(path, mode: str) -> Store:
+def _open_main(path: Path) -> h5py.File:
+    """The main file, read-only, checked to be a rodphase store; NotAStore if not."""
     try:
-        file = h5py.File(path, mode)
+        file = _h5(path, "r")
     except OSError as exc:
         reason = str(exc).split("(")[-1].rstrip(")") if "(" in str(exc) else str(exc)
         raise NotAStore(f"{path} cannot be read as HDF5 ({reason}): give a file written by "
                         "rodphase run or rodphase sweep") from None
-    if _plain(file.attrs.get("format")) != FORMAT or "runs" not in file:
+    try:
+        version = _plain(file.attrs.get("format_version"), f"{path}: format_version")
+        if _plain(file.attrs.get("format"), f"{path}: format") != FORMAT or "runs" not in file:
+            raise NotAStore(f"{path} is an HDF5 file but not a rodphase store (no format "
+                            f"'{FORMAT}' attribute or /runs group): give a file written by "
+                            "rodphase run or rodphase sweep")
+        if version not in READABLE_VERSIONS:
+            raise NotAStore(f"{path} is a rodphase store of format_version {version}; this "
+                            f"rodphase reads {', '.join(map(str, READABLE_VERSIONS))}")
+        _check_layout(file, str(path))
+    except BaseException:
         file.close()
-        raise NotAStore(f"{path} is an HDF5 file but not a rodphase store (no format "
-                        f"'{FORMAT}' attribute or /runs group): give a file written by "
-                        "rodphase run or rodphase sweep")
-    return Store(file)
+        raise
+    return file
+
+
+def _is_empty_hdf5(path: Path) -> bool:
+    try:
+        with _h5(path, "r") as f:
+            return not len(f) and not len(f.attrs)
+    except OSError:
+        return False
+
+
+def open_store(path, *, config_text: str, config_hash: str, version: str, kind: str,
+               replace: bool = False) -> Store:
+    """Open the store at `path` to add runs: create it, or resume it if it holds the same
+    config. Takes the writer lock (StoreBusy if another process writes it).
+
+    A store of another config raises StoreMismatch; with replace=True it is replaced, but
+    only once the first new run is durable (nothing is deleted before then)."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    path = Path(path)
+    if path.is_dir():
+        raise StoreError(f"{path} is a folder: give the path of an .h5 file")
+    lock = _WriterLock(path).acquire()
+    try:
+        new_attrs = dict(format=FORMAT, format_version=FORMAT_VERSION, rodphase_version=version,
+                         kind=kind, config_yaml=config_text, config_hash=config_hash,
+                         created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        other, empty = None, path.exists() and _is_empty_hdf5(path)
+        if path.exists() and not empty:
+            try:
+                with Store(path) as existing:
+                    held = existing.attrs.get("config_hash")
+            except NotAStore as exc:
+                held, other = None, str(exc)
+            if held != config_hash and not replace:
+                raise (NotAStore if other else StoreMismatch)(
+                    other.replace("give a file written by rodphase run or rodphase sweep",
+                                  "use another output file, or --force to replace it")
+                    if other else
+                    f"{path} holds results of a different config (stored hash {held}, this "
+                    f"config {config_hash}); use another output file, or --force to replace it")
+            replacing = held != config_hash
+        else:
+            replacing = empty  # an empty HDF5 file (say from a tool that made the name)
+        _remove_temporaries(path)
+        store = Store(path, lock=lock, new_attrs=new_attrs, replace=replacing)
+        if store.file is None and (empty or not replacing):
+            store.merge()  # a new store exists (empty) from the start: readers can open it
+        return store
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _remove_temporaries(path: Path) -> None:
+    """Temporary files left by a killed writer (only the lock holder writes them)."""
+    leftovers = list(path.parent.glob(f".{path.name}.*.tmp"))
+    folder = parts_folder(path)
+    if folder.is_dir():
+        leftovers += list(folder.glob(".*.tmp"))
+    for tmp in leftovers:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def read_store(path) -> Store:
+    """Open an existing store read-only (its unmerged parts included); NotAStore if `path`
+    is not a rodphase store. Safe while another process writes it."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    return Store(path)
+
+
+def edit_store(path) -> Store:
+    """Open an existing store to store its classification (takes the writer lock:
+    StoreBusy while a sweep writes it); NotAStore if it is not one."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    read_store(path).close()  # refuse a foreign file before taking its lock
+    lock = _WriterLock(path).acquire()
+    try:
+        store = Store(path, lock=lock)
+        store._new_attrs = store.attrs
+        return store
+    except BaseException:
+        lock.release()
+        raise
 
 
 def read_table(path) -> pd.DataFrame:

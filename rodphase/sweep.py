@@ -7,8 +7,14 @@ same command resumes.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
+import os
+import re
+import signal
+import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
@@ -233,6 +239,7 @@ class SweepReport:
     wall: float  # s, the runs only; compiling is compile_time
     failures: list[tuple[str, str, str]]  # run_id, status, message
     compile_time: float = 0.0  # s spent compiling (or loading the cached kernel) first
+    stopped_by: str | None = None  # SIGINT or SIGTERM if a signal stopped the sweep
 
 
 def compile_kernel() -> float:
@@ -255,63 +262,299 @@ def compile_kernel() -> float:
 
 
 def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "loky",
-              scheduler: str | None = None, retry_failed: bool = False,
+              scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
               progress: bool = True, echo: Callable[[str], None] = print) -> SweepReport:
-    """Run every missing sample of the sweep into the store at `out_path` (resuming)."""
+    """Run every missing sample of the sweep into the store at `out_path` (resuming).
+
+    Each finished run is durable in the store as soon as it arrives (see store.py). SIGINT and
+    SIGTERM stop the sweep: the workers are killed, what finished is kept, and the report's
+    `stopped_by` names the signal. A full disk raises StoreFull with every stored run intact.
+    With replace=True a store of another config is replaced, once the first run is stored."""
     from .store import open_store
 
     text = C.to_yaml(sweep=sweep, scene=scene)
     digest = C.config_hash(sweep, scene)
-    where = f"on Dask at {scheduler}" if backend == "dask" and scheduler else (
-        "on a local Dask cluster" if backend == "dask" else "locally")
     report = SweepReport(0, 0, 0, 0, 0.0, [])
-    if backend == "loky":
-        echo("Compiling the kernel (once; numba caches it on disk) ...")
-        report.compile_time = compile_kernel()
-        echo(f"  ready in {report.compile_time:.1f} s")
-    start = time.perf_counter()
-    with open_store(out_path, config_text=text, config_hash=digest, version=__version__,
-                    kind="sweep") as store, _backend(backend, scheduler, jobs) as config:
-        rounds = adaptive_rounds(sweep, scene, store) if sweep.sampler == "adaptive" else [
-            plan(sweep, scene)]
-        for all_jobs in rounds:
-            finished = store.done_ids(include_failed=not retry_failed)
-            todo = [j for j in all_jobs if not set(j.run_ids) <= finished]
-            total = sum(len(j.run_ids) for j in all_jobs)
-            skipped = total - sum(len(j.run_ids) for j in todo)
-            shared = (f" in {len(todo)} continuation run(s)" if sweep.sampler == "continuation"
-                      else "")
-            echo(f"Launching {total - skipped} of {total} runs{shared} {where} with {jobs} "
-                 f"worker(s)" + (f"; {skipped} already in {out_path}" if skipped else ""))
-            _run_jobs(store, todo, config, progress, report)
-            report.total += total
-            report.skipped += skipped
-    report.wall = time.perf_counter() - start
+    with stop_on_signals() as stop:
+        try:
+            # the lock and the config check come first: a second writer or another config's
+            # file is refused before anything is compiled or simulated
+            with open_store(out_path, config_text=text, config_hash=digest, version=__version__,
+                            kind="sweep", replace=replace) as store:
+                if backend == "loky":
+                    echo("Compiling the kernel (once; numba caches it on disk) ...")
+                    with interruptible():
+                        report.compile_time = compile_kernel()
+                    echo(f"  ready in {report.compile_time:.1f} s")
+                start = time.perf_counter()
+                try:
+                    with _pool(backend, scheduler, jobs) as pool:
+                        _run_rounds(sweep, scene, store, pool, retry_failed, progress, report,
+                                    echo, out_path)
+                finally:
+                    report.wall = time.perf_counter() - start
+        except Interrupted:
+            pass
+        report.stopped_by = stop.signal_name
     return report
 
 
-def _run_jobs(store, todo: list[Job], config: dict, progress: bool, report: SweepReport) -> None:
-    """Run jobs in parallel; the parent writes each finished run whole, as it arrives."""
-    from joblib import Parallel, delayed, parallel_config
+def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path):
+    rounds = adaptive_rounds(sweep, scene, store) if sweep.sampler == "adaptive" else [
+        plan(sweep, scene)]
+    for all_jobs in rounds:
+        finished = store.done_ids(include_failed=not retry_failed)
+        todo = [j for j in all_jobs if not set(j.run_ids) <= finished]
+        total = sum(len(j.run_ids) for j in all_jobs)
+        skipped = total - sum(len(j.run_ids) for j in todo)
+        report.total += total
+        report.skipped += skipped
+        shared = (f" in {len(todo)} continuation run(s)" if sweep.sampler == "continuation"
+                  else "")
+        echo(f"Launching {total - skipped} of {total} runs{shared} {pool.where} with "
+             f"{pool.workers} worker(s)" + (f"; {skipped} already in {out_path}" if skipped else ""))
+        _run_jobs(store, todo, pool, progress, report)
 
+
+# a job whose worker died is run again this many times before it is recorded as an error
+WORKER_DEATH_RETRIES = 1
+
+
+def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport) -> None:
+    """Run jobs on the pool, a bounded number at a time; the parent stores each finished run
+    the moment it arrives, so finished results never pile up in memory and a kill loses only
+    the runs in flight."""
     bar = _progress(sum(len(j.run_ids) for j in todo), progress)
-    with parallel_config(**config):
-        results = Parallel(return_as="generator_unordered")(delayed(execute)(job) for job in todo)
-        scene_of = {rid: j.scene for j in todo for rid in j.run_ids}
-        for run_id, params, result, error in itertools.chain.from_iterable(results):
-            if result is None:
-                result = error_result(scene_of[run_id], error)
-            store.write_run(run_id, params, result,
-                            {"wall_time": result.diagnostics.get("wall_time", 0.0)})
-            if result.ok:
-                report.done += 1
-            else:
-                report.failed += 1
-                report.failures.append((run_id, result.status, result.message.splitlines()[-1]
-                                        if result.message else ""))
-            bar.update(1)
-            bar.set_postfix(done=report.done, failed=report.failed)
-    bar.close()
+    waiting = list(reversed(todo))  # pop() takes them in sampling order
+    running: dict = {}  # future -> job
+    deaths: dict[int, int] = {}  # id(job) -> times its worker died under it
+    try:
+        while waiting or running:
+            while waiting and len(running) < pool.window:
+                job = waiting.pop()
+                running[pool.submit(job)] = job
+            with interruptible():
+                done = pool.finished(list(running))
+            for future in done:
+                job = running.pop(future)
+                try:
+                    outcomes = future.result()
+                except Exception as exc:
+                    died = pool.worker_died(exc)
+                    if died and deaths.get(id(job), 0) < WORKER_DEATH_RETRIES:
+                        deaths[id(job)] = deaths.get(id(job), 0) + 1
+                        waiting.append(job)  # run it again first
+                        continue
+                    what = (f"the worker process died while running this job ({died}), "
+                            f"{deaths.get(id(job), 0) + 1} time(s); it may need more memory "
+                            "than the machine has, or crashed the interpreter") if died else (
+                            f"the job failed in its worker: {type(exc).__name__}: {exc}")
+                    outcomes = [(rid, p, None, what) for rid, p in zip(job.run_ids, job.params)]
+                for run_id, params, result, error in outcomes:
+                    if result is None:
+                        result = error_result(job.scene, error)
+                    store.write_run(run_id, params, result,
+                                    {"wall_time": result.diagnostics.get("wall_time", 0.0)})
+                    if result.ok:
+                        report.done += 1
+                    else:
+                        report.failed += 1
+                        report.failures.append((run_id, result.status,
+                                                result.message.splitlines()[-1]
+                                                if result.message else ""))
+                    bar.update(1)
+                    bar.set_postfix(done=report.done, failed=report.failed)
+            _stop.check()
+    finally:
+        bar.close()
+
+
+# ---------------------------------------------------------------- pools
+
+class _LocalPool:
+    """Worker processes on this machine (loky, as joblib uses), fed a few jobs at a time."""
+
+    def __init__(self, jobs: int):
+        self.workers = jobs
+        self.window = 2 * jobs  # enough that no worker waits for the parent
+        self.where = "locally"
+        self._executor = None
+
+    def _get(self):
+        from joblib.externals.loky import get_reusable_executor
+
+        # a broken executor (a worker died) is replaced by a new one here
+        self._executor = get_reusable_executor(
+            max_workers=self.workers, initializer=_worker_start, initargs=(os.getpid(),),
+            env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+        return self._executor
+
+    def submit(self, job):
+        return self._get().submit(execute, job)
+
+    def finished(self, futures):
+        from concurrent.futures import FIRST_COMPLETED, wait
+
+        # a timeout keeps the parent responsive to signals while the workers compute
+        return wait(futures, timeout=0.5, return_when=FIRST_COMPLETED).done
+
+    def worker_died(self, exc) -> str:
+        from concurrent.futures.process import BrokenProcessPool
+
+        if isinstance(exc, BrokenProcessPool):
+            return str(exc).splitlines()[0][:200]
+        return ""
+
+    def close(self, kill: bool) -> None:
+        if self._executor is not None and kill:
+            self._executor.shutdown(wait=True, kill_workers=True)
+
+
+class _DaskPool:
+    def __init__(self, client, cluster, where: str):
+        self.client, self.cluster, self.where = client, cluster, where
+        self.workers = max(1, sum(w.get("nthreads", 1) for w in
+                                  client.scheduler_info().get("workers", {}).values()))
+        self.window = 2 * self.workers
+
+    def submit(self, job):
+        return self.client.submit(execute, job, pure=False)
+
+    def finished(self, futures):
+        from dask.distributed import wait
+
+        try:
+            return wait(futures, timeout=0.5, return_when="FIRST_COMPLETED").done
+        except TimeoutError:
+            return set()
+
+    def worker_died(self, exc) -> str:
+        from distributed import KilledWorker
+
+        # Dask has already retried the task on other workers (allowed-failures)
+        return str(exc).splitlines()[0][:200] if isinstance(exc, KilledWorker) else ""
+
+    def close(self, kill: bool) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def _worker_start(parent_pid: int) -> None:
+    """In each worker as it starts: die with the parent. A killed parent (SIGKILL, OOM) runs
+    no cleanup, and loky workers busy in a long run were seen outliving it by many minutes."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+@contextmanager
+def _pool(backend: str, scheduler: str | None, jobs: int) -> Iterator:
+    if backend == "loky":
+        if scheduler:
+            raise C.ConfigError("--scheduler", scheduler, "only with --backend dask")
+        pool = _LocalPool(jobs)
+    elif backend == "dask":
+        pool = _dask_pool(scheduler, jobs)
+    else:
+        raise C.ConfigError("--backend", backend, "loky or dask")
+    clean = False
+    try:
+        yield pool
+        clean = True
+    finally:
+        pool.close(kill=not clean)
+
+
+SCHEDULER_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx|inproc)://)?[\w.\-]+:\d{1,5}/?$|"
+                               r"^(?:(?:tcp|tls)://)?\[[0-9a-fA-F:]+\]:\d{1,5}/?$")
+SCHEDULER_TIMEOUT = 10  # s to reach a Dask scheduler before saying it cannot be reached
+
+
+def _dask_pool(scheduler: str | None, jobs: int) -> _DaskPool:
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise C.ConfigError("--backend", "dask",
+                            "installed first: pip install 'rodphase[dask]'") from None
+    if scheduler:
+        if not SCHEDULER_ADDRESS.match(scheduler):
+            raise C.ConfigError("--scheduler", scheduler,
+                                "a Dask scheduler address such as tcp://host:8786")
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+        except (OSError, TimeoutError) as exc:
+            raise C.ConfigError("--scheduler", scheduler,
+                                f"a Dask scheduler that answers within {SCHEDULER_TIMEOUT} s "
+                                f"(connecting failed: {str(exc).splitlines()[0][:120]})") from None
+        return _DaskPool(client, None, f"on Dask at {scheduler}")
+    cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                           host="127.0.0.1", dashboard_address=None)
+    return _DaskPool(Client(cluster), cluster, "on a local Dask cluster")
+
+
+# ---------------------------------------------------------------- signals
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupted(Exception):
+    """SIGINT or SIGTERM arrived: the sweep stops, keeping what finished."""
+
+
+class _Stop:
+    signal_name: str | None = None  # the signal that asked the sweep to stop
+    interruptible: int = 0  # > 0 where raising at once is safe (waiting, compiling)
+
+    def check(self) -> None:
+        """Raise Interrupted if a stop was asked for (call at safe points)."""
+        if self.signal_name:
+            raise Interrupted(self.signal_name)
+
+
+_stop = _Stop()
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[_Stop]:
+    """SIGINT (Ctrl-C) and SIGTERM (batch systems, docker stop) stop the sweep at the next safe
+    point: at once while waiting for workers or compiling, never inside a store write (an
+    exception raised inside h5py's C callbacks leaves it in a broken state). Outside the main
+    thread (no signals there), a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield _Stop()
+        return
+
+    def handler(signum, frame):
+        _stop.signal_name = signal.Signals(signum).name
+        for s in STOP_SIGNALS:  # a second Ctrl-C must not break the clean stop
+            signal.signal(s, signal.SIG_IGN)
+        if _stop.interruptible:
+            raise Interrupted(_stop.signal_name)
+
+    _stop.signal_name, _stop.interruptible = None, 0
+    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
+    try:
+        yield _stop
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
+@contextmanager
+def interruptible() -> Iterator[None]:
+    """A stretch of pure waiting or compiling, where a stop may be raised at once."""
+    _stop.check()
+    _stop.interruptible += 1
+    try:
+        yield
+    finally:
+        _stop.interruptible -= 1
 
 
 def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
@@ -373,29 +616,3 @@ def _progress(total: int, enabled: bool):
     from tqdm import tqdm
 
     return tqdm(total=total, disable=not enabled or total == 0, unit="run", dynamic_ncols=True)
-
-
-@contextmanager
-def _backend(backend: str, scheduler: str | None, jobs: int) -> Iterator[dict]:
-    if backend == "loky":
-        yield {"backend": "loky", "n_jobs": jobs}
-        return
-    if backend != "dask":
-        raise C.ConfigError("--backend", backend, "loky or dask")
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise C.ConfigError("--backend", "dask", "installed first: pip install 'rodphase[dask]'") from None
-    if scheduler:
-        client = Client(scheduler)
-        cluster = None
-    else:
-        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=None)
-        client = Client(cluster)
-    try:
-        yield {"backend": "dask", "n_jobs": -1}
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()

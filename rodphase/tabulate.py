@@ -39,14 +39,19 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     return row
 
 
-def classify_store(store, **thresholds) -> pd.DataFrame:
-    """Classify every run of an open store and write the table back into it."""
+def classify_table(store, **thresholds) -> pd.DataFrame:
+    """Classify every run of an open store: one row per run (nothing written)."""
     rows = []
     for run_id in sorted(store.run_ids()):
         result = store.read_run(run_id)
         row = {"run_id": run_id} | store.run_params(run_id) | summarize(result, **thresholds)
         rows.append(row)
-    table = pd.DataFrame(rows)
+    return pd.DataFrame(rows)
+
+
+def classify_store(store, **thresholds) -> pd.DataFrame:
+    """Classify every run of a store open for writing and store the table in it."""
+    table = classify_table(store, **thresholds)
     store.write_classification(table)
     return table
 

@@ -238,3 +238,49 @@ def test_a_figure_the_data_cannot_make_is_an_error_line(tmp_path):
     assert result.exit_code in (0, 1), result.output
     result = runner.invoke(main, ["plot", str(out), "--kind", "response", "-o", str(tmp_path / "r.png")])
     assert result.exit_code == 2 and "error: --kind response" in result.output
+
+
+def _tiny_sweep(tmp_path, **sweep_keys):
+    data = {"sweep": {"scene": "twist_under_load",
+                      "axes": {"twist_density": [0.2, 1.0], "extension": [1.0, 1.2]},
+                      "samples": 2, **sweep_keys}}
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.parametrize("where, key", [("--set", "loading.twist_density"),
+                                        ("--set", "loading.twist_turns"),
+                                        ("--set", "loading.force_multiple"),
+                                        ("sweep.set", "loading.extension")])
+def test_a_value_that_a_sweep_axis_would_replace_is_refused(tmp_path, where, key):
+    if where == "--set":
+        args = ["--set", f"{key}=1.0"]
+        path = _tiny_sweep(tmp_path)
+    else:
+        args = []
+        path = _tiny_sweep(tmp_path, set={key: 1.1})
+    result = run_cli(["sweep", str(path), "-o", str(tmp_path / "o.h5"), "--quiet", *args])
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith(f"error: {where.replace('--set', '--set ')}"
+                                    f"{'' if where == '--set' else '.'}{key}")
+    assert "axis" in result.output and not (tmp_path / "o.h5").exists()
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--backend", "dask", "--scheduler", "not an address"], "tcp://host:8786"),
+    (["--scheduler", "tcp://127.0.0.1:8786"], "only with --backend dask"),
+])
+def test_a_scheduler_address_is_checked_before_anything_runs(tmp_path, args, words):
+    result = run_cli(["sweep", str(_tiny_sweep(tmp_path)), "-o", str(tmp_path / "o.h5"),
+                      "--quiet", *args])
+    assert result.exit_code == 2 and result.output.startswith("error: --scheduler")
+    assert words in result.output and "Compiling" not in result.output
+
+
+def test_run_checks_its_output_before_simulating(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("a file, not a folder")
+    result = run_cli(["run", "twist_under_load", "-o", str(blocker / "out.h5")])
+    assert result.exit_code == 2 and result.output.startswith("error: --output")
+    assert "Running" not in result.output

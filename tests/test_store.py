@@ -1,5 +1,12 @@
 """HDF5 store: round trip, resume semantics, config mismatch, crash safety, tables."""
 
+import errno
+import pickle
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
 import h5py
 import numpy as np
 import pandas as pd
@@ -101,32 +108,161 @@ def test_bad_run_id(tmp_path):
         store.write_run("a/b", {}, fake_result(), {})
 
 
-def test_crash_mid_write_is_not_done_and_is_overwritten(tmp_path):
+def test_temporary_files_of_a_killed_writer_are_not_runs_and_are_removed(tmp_path):
     path = tmp_path / "s.h5"
     with open_(path) as store:
         store.write_run("a", {}, fake_result(), {})
-    # what a writer killed mid-run leaves: a half-written group under the temporary name
-    with h5py.File(path, "a") as f:
-        half = f.create_group(f"{st.PARTIAL}/b")
-        half.attrs["status"] = "ok"
-        half.create_dataset("positions", data=np.zeros((3, 3)))
+    # what a writer killed mid-write leaves: a half-written run file and a half-written copy
+    # of the main file, both under temporary names
+    folder = st.parts_folder(path)
+    folder.mkdir()
+    (folder / ".b.h5.999.tmp").write_bytes(b"\x89HDF\r\n\x1a\n half a run")
+    (tmp_path / ".s.h5.999.tmp").write_bytes(path.read_bytes()[:1000])
+    with st.read_store(path) as store:  # a reader ignores them
+        assert store.run_ids() == ["a"]
     with open_(path) as store:
         assert store.done_ids(include_failed=True) == {"a"}
-        assert store.run_ids() == ["a"]
         store.write_run("b", {"x": 1.0}, fake_result(seed=4), {})
         assert store.done_ids() == {"a", "b"}
         np.testing.assert_array_equal(store.read_run("b").positions,
                                       fake_result(seed=4).positions)
-    with h5py.File(path, "r") as f:
-        assert st.PARTIAL not in f
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.h5"]  # merged, nothing left over
 
 
-def test_partial_group_in_open_store_is_replaced(tmp_path):
-    with open_(tmp_path / "s.h5") as store:
-        store.file.create_group(f"{st.PARTIAL}/b").attrs["status"] = "ok"
-        assert store.done_ids() == set()
+def test_a_finished_run_is_durable_before_it_is_merged(tmp_path):
+    """A run is kept from the moment write_run returns: a writer killed before merging
+    leaves it in OUT.h5.parts, readers see it, and the next writer merges it."""
+    path = tmp_path / "s.h5"
+    code = (f"import os, signal, sys; sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
+            "from test_store import open_, fake_result\n"
+            f"store = open_({str(path)!r})\n"
+            "store.write_run('a', {'x': 1.0}, fake_result(), {})\n"
+            "os.kill(os.getpid(), signal.SIGKILL)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    assert (st.parts_folder(path) / "a.h5").exists()
+    with st.read_store(path) as store:
+        assert store.done_ids() == {"a"}
+        np.testing.assert_array_equal(store.read_run("a").positions, fake_result().positions)
+    with open_(path) as store:  # the killed writer's lock died with it
+        assert store.run_ids() == ["a"]
+    with h5py.File(path, "r") as f:  # merged into the one file, readable with h5py alone
+        assert list(f["runs"]) == ["a"] and f["runs/a"].attrs["param_x"] == 1.0
+    assert not st.parts_folder(path).exists() and not st.lock_path(path).exists()
+
+
+def test_one_writer_at_a_time_while_readers_follow(tmp_path):
+    path = tmp_path / "s.h5"
+    with open_(path) as store:
+        store.write_run("a", {}, fake_result(), {})
+        with pytest.raises(st.StoreBusy, match="being written by another rodphase process"):
+            open_(path)
+        with pytest.raises(st.StoreBusy):
+            st.edit_store(path)
+        assert st.read_table(path)["run_id"].tolist() == ["a"]  # a reader sees the part
         store.write_run("b", {}, fake_result(), {})
-        assert store.done_ids() == {"b"} and st.PARTIAL not in store.file
+        assert st.read_table(path)["run_id"].tolist() == ["a", "b"]
+    open_(path).close()  # free again once the writer closed
+
+
+def test_merges_replace_the_file_whole(tmp_path, monkeypatch):
+    """The main file is replaced by rename, never modified in place: a reader holding it
+    open keeps reading the version it opened."""
+    monkeypatch.setattr(st, "MERGE_EVERY", 2)
+    path = tmp_path / "s.h5"
+    with open_(path) as store:
+        store.write_run("a", {}, fake_result(), {})
+        inode = path.stat().st_ino
+        reader = st.read_store(path)
+        store.write_run("b", {}, fake_result(), {})  # the second part triggers a merge
+        assert path.stat().st_ino != inode and not st.parts_folder(path).exists()
+        assert reader.run_ids() == ["a"] and reader.read_run("a").status == "ok"
+        reader.close()
+
+
+def test_a_full_disk_leaves_everything_stored_intact(tmp_path, monkeypatch):
+    path = tmp_path / "s.h5"
+    with open_(path) as store:
+        store.write_run("a", {}, fake_result(), {})
+        real_fsync = st._fsync
+
+        def full(target):
+            if target.name.endswith(".tmp"):
+                raise OSError(errno.ENOSPC, "No space left on device")
+            real_fsync(target)
+
+        monkeypatch.setattr(st, "_fsync", full)
+        with pytest.raises(st.StoreFull, match="disk is full"):
+            store.write_run("b", {}, fake_result(), {})
+        with pytest.raises(st.StoreFull):
+            store.merge()
+        monkeypatch.setattr(st, "_fsync", real_fsync)
+        assert store.run_ids() == ["a"]
+    assert st.read_table(path)["run_id"].tolist() == ["a"]
+    leftovers = [p.name for p in tmp_path.rglob("*") if p.name.endswith(".tmp")]
+    assert leftovers == []
+
+
+def test_replacing_another_config_waits_for_the_first_new_run(tmp_path):
+    path = tmp_path / "s.h5"
+    with open_(path) as store:
+        store.write_run("old", {}, fake_result(), {})
+    store = st.open_store(path, config_text=CONFIG, config_hash="ffff99", version="0.1.0",
+                          kind="sweep", replace=True)
+    with st.read_store(path) as reader:  # nothing deleted yet
+        assert reader.attrs["config_hash"] == HASH and reader.run_ids() == ["old"]
+    assert store.run_ids() == []
+    store.write_run("new", {}, fake_result(), {})
+    store.close()
+    with st.read_store(path) as reader:
+        assert reader.attrs["config_hash"] == "ffff99" and reader.run_ids() == ["new"]
+    with open_(path, config_hash="ffff99", ) as store:  # the same config: nothing replaced
+        assert store.run_ids() == ["new"]
+
+
+def test_a_retried_run_drops_its_stale_classification_row(tmp_path):
+    path = tmp_path / "s.h5"
+    with open_(path) as store:
+        store.write_run("a", {}, fake_result("unstable"), {})
+        store.write_run("b", {}, fake_result(), {})
+        store.write_classification(pd.DataFrame({"run_id": ["a", "b"],
+                                                 "phase": ["failed", "straight"]}))
+    with open_(path) as store:
+        store.write_run("a", {}, fake_result(), {})
+    table = st.read_table(path)
+    assert pd.isna(table["phase"][0]) and table["phase"][1] == "straight"
+
+
+def _foreign(path, how):
+    with open_(path) as store:
+        store.write_run("a", {}, fake_result(), {})
+    with h5py.File(path, "a") as f:
+        if how == "external link":
+            f["runs/b"] = h5py.ExternalLink("/etc/elsewhere.h5", "/runs/a")
+        elif how == "soft link":
+            f["runs/b"] = h5py.SoftLink("/runs/a")
+        elif how == "external storage":
+            raw = path.parent / "raw.bin"
+            raw.write_bytes(np.zeros(8).tobytes())
+            f["runs/a"].create_dataset("extra", shape=(8,), dtype="f8",
+                                       external=[(str(raw), 0, h5py.h5f.UNLIMITED)])
+        elif how == "pickled attribute":
+            f["runs/a"].attrs["message"] = np.void(pickle.dumps({"a": 1}))
+
+
+@pytest.mark.parametrize("how", ["external link", "soft link", "external storage",
+                                 "pickled attribute"])
+def test_layouts_rodphase_never_writes_are_refused(tmp_path, how):
+    path = tmp_path / "s.h5"
+    _foreign(path, how)
+    with pytest.raises(st.NotAStore, match="rodphase"):
+        st.read_table(path)
+    if how == "pickled attribute":  # attributes are checked as they are read
+        with st.read_store(path) as store, pytest.raises(st.NotAStore, match="opaque"):
+            store.read_run("a")
+    else:  # links and storage as the file is opened, by writers too
+        with pytest.raises(st.NotAStore):
+            open_(path).close()
 
 
 def test_classification_round_trip_through_table(tmp_path):
@@ -170,3 +306,19 @@ def test_empty_table(tmp_path):
     with open_(tmp_path / "s.h5") as store:
         table = store.table()
     assert len(table) == 0 and "status" in table.columns
+
+
+def test_without_flock_or_fallocate_the_fallbacks_hold(tmp_path, monkeypatch):
+    """macOS has no posix_fallocate and Windows no fcntl: the store still locks and merges."""
+    monkeypatch.setattr(st, "fcntl", None)
+    monkeypatch.delattr(st.os, "posix_fallocate", raising=False)
+    monkeypatch.setattr(st, "MERGE_EVERY", 1)
+    path = tmp_path / "s.h5"
+    with open_(path) as store:
+        with pytest.raises(st.StoreBusy, match="if that process no longer runs, delete"):
+            open_(path)
+        store.write_run("a", {}, fake_result(), {})  # merged at once (MERGE_EVERY = 1)
+        assert not st.parts_folder(path).exists()
+    assert not st.lock_path(path).exists()
+    with open_(path) as store:
+        np.testing.assert_array_equal(store.read_run("a").positions, fake_result().positions)
