@@ -18,6 +18,8 @@ from typing import Any
 
 import yaml
 
+from . import units
+
 PACKAGE_CONFIGS = Path(__file__).resolve().parent / "configs"
 
 
@@ -343,8 +345,9 @@ def shear_modulus(cfg) -> float:
 
 
 def buckling_force(cfg) -> float:
-    rod, E = cfg["rod"], cfg["material"].youngs_modulus
-    return math.pi**2 * E * math.pi * rod.radius**4 / 4.0 / rod.length**2
+    """F_C of the scene's rod [N]."""
+    rod = cfg["rod"]
+    return units.critical_force(cfg["material"].youngs_modulus, rod.radius, rod.length)
 
 
 def load_force(cfg) -> float | None:
@@ -355,7 +358,7 @@ def load_force(cfg) -> float | None:
     if loading.force_multiple is not None:
         return loading.force_multiple * buckling_force(cfg)
     if loading.extension is not None:
-        return E * math.pi * rod.radius**2 * (1.0 - 1.0 / loading.extension)
+        return units.load_for_extension(E, rod.radius, loading.extension)
     return None
 
 
@@ -365,19 +368,17 @@ def twist_turns(cfg) -> float:
     if loading.twist_turns is not None:
         return loading.twist_turns
     if loading.twist_density is not None:
-        return loading.twist_density * rod.length / rod.radius / (2 * math.pi)
+        return units.turns_for_twist_density(loading.twist_density, rod.radius, rod.length)
     if loading.twist_density_current is not None:
-        # Φa_current = θ·(a0/√e)/(e·L0): the twist density of the straight stretched rod
-        return (loading.twist_density_current * rod.length * straight_extension(cfg) ** 1.5
-                / rod.radius / (2 * math.pi))
+        return units.turns_for_current_twist_density(loading.twist_density_current, rod.radius,
+                                                     rod.length, straight_extension(cfg))
     return 0.0
 
 
 def straight_extension(cfg) -> float:
     """L/L0 of the straight rod under the scene's constant load (1 without one)."""
-    force = load_force(cfg) or 0.0
-    area = math.pi * cfg["rod"].radius ** 2
-    return 1.0 / (1.0 - force / (cfg["material"].youngs_modulus * area))
+    return units.extension_under_load(cfg["material"].youngs_modulus, cfg["rod"].radius,
+                                      load_force(cfg) or 0.0)
 
 
 # ---------------------------------------------------------------- loading files

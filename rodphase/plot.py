@@ -25,6 +25,7 @@ from matplotlib.lines import Line2D
 from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
+from . import units
 from .result import RunResult, rotation_put_in
 
 DPI = 200
@@ -221,7 +222,7 @@ def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: floa
         raise ValueError("topology_curves needs rest_radius and rest_length (m) to compute "
                          "Φa; pass them for a plain history dict")
     turned = rotation_put_in(history)
-    phi_a = turned * rest_radius / rest_length
+    phi_a = units.twist_density_for_rotation(turned, rest_radius, rest_length)
 
     with matplotlib.rc_context(STYLE):
         fig = _figure(figsize=(5.0, 3.6))

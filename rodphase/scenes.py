@@ -15,10 +15,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import config as C
+from . import units
 from .rod import Contact, Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp
 from .rod.model import state_from, straight_state
 
-TURN = 2.0 * math.pi
+TURN = units.TURN
 
 
 def rod_from(cfg) -> Rod:
@@ -244,7 +245,7 @@ def active_agent(cfg) -> Problem:
     segment = (int(round(a.first * n)), int(round(a.last * n)))
     pull = a.pull_multiple * rod.buckling_force
     extra = a.extra_twist_density / rod.radius  # rad/m
-    at_turns = a.at_twist_density * rod.length / rod.radius / TURN
+    at_turns = units.turns_for_twist_density(a.at_twist_density, rod.radius, rod.length)
     final = C.twist_turns(cfg)
     ramp_time = cfg.loading.force_ramp_time
     on = dict(segment=segment, local_pull=constant(pull), local_twist=constant(extra))

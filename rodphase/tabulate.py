@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from . import units
 from .classify import alignment, phase
 from .result import rotation_put_in
 
@@ -27,10 +28,11 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     row["end_rotation_turns"] = float(h["end_rotation"][-1] / (2 * np.pi))
     # twist density with rest length and radius, and of the straight stretched rod
     # (L = e L0, a = a0/√e, e from the applied load): papers use either
-    row["phi_a_rest"] = float(rotation_put_in(h)[-1] * radius / rest_length)
-    stiffness = d.get("youngs_modulus", np.nan) * np.pi * radius**2
-    e_load = 1.0 / (1.0 - float(h["applied_force"][-1]) / stiffness)
-    row["phi_a_current"] = row["phi_a_rest"] / e_load**1.5
+    row["phi_a_rest"] = float(units.twist_density_for_rotation(rotation_put_in(h)[-1], radius,
+                                                               rest_length))
+    e_load = units.extension_under_load(d.get("youngs_modulus", np.nan), radius,
+                                        float(h["applied_force"][-1]))
+    row["phi_a_current"] = units.current_twist_density(row["phi_a_rest"], e_load)
     row["final_extension"] = float((rest_length + h["end_displacement"][-1]) / rest_length)
     row["end_force"] = float(h["end_force"][-1])
     for key in ("link", "twist", "writhe"):
@@ -70,7 +72,7 @@ def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
     table = pd.DataFrame({
         "time": h["time"][rows], "stage": h["stage"][rows],
         "extension": 1.0 + h["end_displacement"][rows] / rest_length,
-        "twist_density": (turned * radius / rest_length)[rows],
+        "twist_density": units.twist_density_for_rotation(turned, radius, rest_length)[rows],
         "alignment": values,
         "phase": [phase(v, plectoneme_below, solenoid_above) for v in values],
     })

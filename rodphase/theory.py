@@ -10,6 +10,8 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
+from . import units
+
 
 def greenhill_clamped_moment(tension: float, length: float, bending: float) -> float:
     """Smallest axial moment M [N m] at which a straight rod clamped at both ends, under
@@ -38,9 +40,8 @@ def stretched_rod_buckling_moments(force: float, youngs_modulus: float, radius: 
     """(e, clamped Greenhill M_c, 2√(B·F)) for the incompressible rod of rest radius `radius`
     and rest length `length` stretched by an axial force: e = 1/(1 − F/(E·A0)), and the
     straight stretched rod has length e·L0 and bending stiffness B/e² (I = I0/e²)."""
-    area = math.pi * radius**2
-    bending = youngs_modulus * math.pi * radius**4 / 4.0
-    e = 1.0 / (1.0 - force / (youngs_modulus * area))
+    bending = youngs_modulus * units.second_moment_of_area(radius)
+    e = units.extension_under_load(youngs_modulus, radius, force)
     return (e, greenhill_clamped_moment(force, e * length, bending / e**2),
             long_rod_buckling_moment(force, bending / e**2))
 

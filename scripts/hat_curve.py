@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rodphase import plot as P
+from rodphase import units
 from rodphase.result import rotation_put_in
 from rodphase.store import read_store
 from rodphase.theory import stretched_rod_buckling_moments
@@ -49,7 +50,7 @@ def measure(result) -> dict:
     going_down = down[turns[down] > 0]
     straight_again = going_down[writhe[going_down] < WRITHE_BUCKLED]
     return {
-        "force_N": force, "force_FC": force / (np.pi**2 * young * np.pi * radius**4 / 4 / length**2), "extension": e,
+        "force_N": force, "force_FC": force / units.critical_force(young, radius, length), "extension": e,
         "buckling_torque": float(abs(torque[peak])),
         "greenhill": greenhill, "two_sqrt_BF": two_sqrt_bf,
         "buckling_turns": float(turns[peak]),
