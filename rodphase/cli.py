@@ -88,6 +88,10 @@ def run(scene, output, sets, force):
     # be written is refused before it costs anything
     with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
                     version=__version__, kind="run", replace=force) as store:
+        from .sweep import compile_kernel
+
+        click.echo("Compiling the kernel (once; numba caches it on disk) ...")
+        click.echo(f"  ready in {compile_kernel():.1f} s")  # kept out of the run's own timing
         click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
         result = run_scene(cfg.plain())
         store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
@@ -184,7 +188,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
             raise C.ConfigError(store_file, "no finished runs yet",
                                 "a store with at least one run (a sweep killed before its "
                                 "first run has none; run the same sweep command again)")
-        table = (classify_table(store, **thresholds) if busy else
+        table = (store.table(classify_table(store, **thresholds)) if busy else
                  classify_store(store, **thresholds))
     if busy:
         click.echo(f"note: {busy}; the table below covers the runs finished so far and is not "
@@ -293,6 +297,32 @@ def movie(store_file, run_id, output, fps):
         result = store.read_run(run_id)
     path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps)
     click.echo(f"written {path}")
+
+
+@main.command()
+@click.argument("name", metavar="SCENE_OR_SWEEP")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@reports_errors
+def config(name, sets):
+    """Print the resolved config (defaults filled in, overrides applied) as YAML.
+
+    \b
+    Example:
+      rodphase config twist_under_load --set rod.elements=60
+      rodphase config quick --set sweep.samples=40
+    """
+    from .scenes import SCENES
+
+    try:
+        path = C.resolve_sweep_path(name)
+        is_sweep = "sweep" in C.read_yaml(path)
+    except C.ConfigError:
+        is_sweep = False
+    if is_sweep:
+        sweep_cfg, scene_cfg = C.load_sweep(path, _overrides(sets), SCENES)
+        click.echo(C.to_yaml(sweep=sweep_cfg, scene=scene_cfg), nl=False)
+    else:
+        click.echo(C.to_yaml(scene=C.load_scene(name, _overrides(sets), SCENES)), nl=False)
 
 
 @main.command()

@@ -73,3 +73,19 @@ class RunResult:
     @property
     def end_rotation_turns(self) -> np.ndarray:
         return self.history["end_rotation"] / (2 * np.pi)
+
+
+# units of the history columns as stored ("1": dimensionless, a count or an index)
+HISTORY_UNITS = {
+    "time": "s", "end_rotation": "rad", "end_force": "N", "end_torque": "N m",
+    "end_displacement": "m", "applied_force": "N", "stretch_energy": "J", "bend_energy": "J",
+    "kinetic_energy": "J", "contacts": "1", "penetration": "1", "residual": "1",
+    "stiffness_factor": "1", "radius_factor": "1", "contact_energy": "J",
+    "start_rotation": "rad", "stage": "1", "link": "turns", "twist": "turns",
+    "writhe": "turns", "link_escapes": "1",
+}
+
+
+def history_unit(name: str) -> str:
+    """The unit of a history column; a column rodphase does not know is marked "unknown"."""
+    return HISTORY_UNITS.get(name, "unknown")

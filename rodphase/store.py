@@ -45,7 +45,7 @@ try:
 except ImportError:  # Windows: the lock falls back to a file created exclusively
     fcntl = None
 
-from .result import RunResult
+from .result import RunResult, history_unit
 
 FORMAT = "rodphase-store"
 FORMAT_VERSION = 2  # 2: runs arrive through OUT.h5.parts/; the file's own layout is that of 1
@@ -518,6 +518,9 @@ class Store:
                 for run_id, part in sorted(parts.items()):
                     with _h5(part, "r") as src:
                         f.copy(src["runs"][run_id], runs, name=run_id)
+                    # a copy keeps the dimension scales' references to the part file's
+                    # addresses: label the copy's dimensions again
+                    _name_dimensions(runs[run_id])
                 if replaced and "classification" in f:
                     # a classification describes the runs it saw: rows of replaced runs go
                     table = _read_classification(f["classification"])
@@ -560,6 +563,28 @@ class Store:
         if not self.writable:
             raise StoreError(f"{self._path} is open for reading only")
 
+    def histories(self, columns=None, run_ids=None) -> pd.DataFrame:
+        """The time histories of many runs stacked in one long table, ready for groupby or
+        seaborn: one row per (run, history row) with run_id, the run's parameters and status,
+        and the history columns asked for (all by default; a run lacking one gets NaN)."""
+        frames = []
+        for rid in run_ids if run_ids is not None else self.run_ids():
+            with self._run_group(rid) as g:
+                history = g["history"]
+                names = [_plain(c) for c in history.attrs.get("columns", list(history))]
+                wanted = names if columns is None else list(columns)
+                frame = pd.DataFrame({c: history[c][()] if c in history else np.nan
+                                      for c in wanted} if wanted else {},
+                                     index=pd.RangeIndex(len(history["time"]), name="row"))
+                params = self._prefixed(g, rid, PARAM_PREFIX)
+                status = _plain(g.attrs["status"], f"{self._path}: run {rid} status")
+            frames.append(frame.reset_index().assign(run_id=rid, status=status, **params))
+        if not frames:
+            return pd.DataFrame(columns=["run_id", "row", "status"])
+        table = pd.concat(frames, ignore_index=True)
+        first = ["run_id", "row", "status"]
+        return table[first + [c for c in table.columns if c not in first]]
+
     # --- tables ---------------------------------------------------------------------------
 
     def write_classification(self, df: pd.DataFrame) -> None:
@@ -586,10 +611,11 @@ class Store:
             return None
         return _read_classification(self.file["classification"])
 
-    def table(self) -> pd.DataFrame:
+    def table(self, classification: pd.DataFrame | None = None) -> pd.DataFrame:
         """One row per run: run_id, params, status, message, wall_time, steps, and the
-        classification columns if any (a column already present gets the suffix
-        "_classified")."""
+        classification columns (the stored ones, or `classification` if given). A
+        classification column that repeats a column of the runs with the same values is
+        left out; one with the same name and other values gets the suffix "_classified"."""
         rows = []
         for rid in self.run_ids():
             with self._run_group(rid) as g:
@@ -602,25 +628,61 @@ class Store:
             rows.append(row)
         table = pd.DataFrame(rows, columns=None if rows else
                              ["run_id", "status", "message", "wall_time", "steps"])
-        classified = self.classification()
+        classified = self.classification() if classification is None else classification
         if classified is not None:
             classified = classified.astype({"run_id": str})
-            table = table.merge(classified, on="run_id", how="left",
+            shared = table.merge(classified, on="run_id", how="inner", suffixes=("", "__c"))
+            repeated = [c for c in classified.columns if c != "run_id" and c in table.columns
+                        and _same(shared[c], shared[c + "__c"])]
+            table = table.merge(classified.drop(columns=repeated), on="run_id", how="left",
                                 suffixes=("", "_classified"))
         return table
 
 
 # ----------------------------------------------------------------------------- layout
 
-def _write_array(group: h5py.Group, name: str, data, *, per_snapshot: bool = False):
+# units of the per-run arrays ("1": dimensionless or an index); history columns: HISTORY_UNITS
+ARRAY_UNITS = {"positions": "m", "directors": "1", "radii": "m", "rest_lengths": "m"}
+# Each array's dimensions, named by HDF5 dimension scales so that netCDF readers (xarray
+# through h5netcdf) see named dimensions instead of phony_dim_N. Scales of the run group
+# serve its subgroups too; `time` is the history's own column and a copy in snapshots/.
+DIMENSIONS = {"positions": ("node", "xyz"), "directors": ("element", "director", "xyz"),
+              "radii": ("element",), "rest_lengths": ("element",),
+              "snapshots/positions": ("time", "node", "xyz"),
+              "snapshots/d1": ("time", "element", "xyz")}
+
+
+def _write_array(group: h5py.Group, name: str, data, *, units: str,
+                 per_snapshot: bool = False) -> h5py.Dataset:
     data = np.asarray(data)
     if per_snapshot and data.size:
         # one chunk per snapshot: a movie frame is one chunk read, and gzip pays off on
         # slowly varying rods
-        group.create_dataset(name, data=data, chunks=(1,) + data.shape[1:],
-                             compression="gzip", compression_opts=4, shuffle=True)
+        ds = group.create_dataset(name, data=data, chunks=(1,) + data.shape[1:],
+                                  compression="gzip", compression_opts=4, shuffle=True)
     else:
-        group.create_dataset(name, data=data)
+        ds = group.create_dataset(name, data=data)
+    ds.attrs["units"] = units
+    return ds
+
+
+def _name_dimensions(g: h5py.Group) -> None:
+    """Attach the run group's dimension scales to its arrays (again, after a copy: the
+    references are file addresses, and HDF5's copy does not re-point them)."""
+    labelled = [(g[name], dims) for name, dims in DIMENSIONS.items()]
+    history = g["history"]
+    labelled += [(history[name], ("time",)) for name in history if name != "time"]
+    for ds, _ in labelled:
+        if "DIMENSION_LIST" in ds.attrs:
+            del ds.attrs["DIMENSION_LIST"]
+    scales = {name: g[name] for name in ("node", "element", "director", "xyz")}
+    for ds in list(scales.values()) + [history["time"], g["snapshots/time"]]:
+        if "REFERENCE_LIST" in ds.attrs:
+            del ds.attrs["REFERENCE_LIST"]
+    for ds, dims in labelled:
+        for axis, name in enumerate(dims):
+            # history and snapshots each have their own time
+            ds.dims[axis].attach_scale(ds.parent["time"] if name == "time" else scales[name])
 
 
 def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
@@ -639,25 +701,37 @@ def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
     g.attrs["wall_time"] = float(timings.get("wall_time", diag.get("wall_time", math.nan)))
     g.attrs["steps"] = int(timings.get("steps", diag.get("steps", -1)))
 
-    _write_array(g, "positions", result.positions)
-    _write_array(g, "directors", result.directors)
-    _write_array(g, "radii", result.radii)
-    _write_array(g, "rest_lengths", result.rest_lengths)
+    n = len(result.rest_lengths)
+    for name, values in (("node", np.arange(n + 1)), ("element", np.arange(n)),
+                         ("director", np.arange(1, 4)), ("xyz", np.arange(3))):
+        _write_array(g, name, values, units="1").make_scale(name)
+    for name in ("positions", "directors", "radii", "rest_lengths"):
+        _write_array(g, name, getattr(result, name), units=ARRAY_UNITS[name])
     history = g.create_group("history", track_order=True)
+    time = np.asarray(result.history.get("time", np.zeros(0)))
     for name, column in result.history.items():
-        _write_array(history, name, column)
+        _write_array(history, name, column, units=history_unit(name))
     history.attrs["columns"] = list(result.history)
+    if "time" not in history:
+        _write_array(history, "time", time, units="s")
+    history["time"].make_scale("time")
     snapshots = g.create_group("snapshots")
-    _write_array(snapshots, "positions", result.snapshot_positions, per_snapshot=True)
-    _write_array(snapshots, "d1", result.snapshot_d1, per_snapshot=True)
+    _write_array(snapshots, "time", time[:len(result.snapshot_positions)],
+                 units="s").make_scale("time")
+    _write_array(snapshots, "positions", result.snapshot_positions, units="m", per_snapshot=True)
+    _write_array(snapshots, "d1", result.snapshot_d1, units="1", per_snapshot=True)
+    _name_dimensions(g)
 
 
 def _write_classification(f: h5py.File, df: pd.DataFrame) -> None:
     if "classification" in f:
         del f["classification"]
     g = f.create_group("classification", track_order=True)
+    key = g.create_dataset("run_id", data=_column_array(df["run_id"]))
+    key.make_scale("run_id")  # the table's one dimension, named for netCDF readers
     for name in df.columns:
-        g.create_dataset(str(name), data=_column_array(df[name]))
+        if name != "run_id":
+            g.create_dataset(str(name), data=_column_array(df[name])).dims[0].attach_scale(key)
     g.attrs["columns"] = [str(c) for c in df.columns]
 
 
@@ -668,6 +742,15 @@ def _read_classification(g: h5py.Group) -> pd.DataFrame:
         ds = g[name]
         data[name] = ds.asstr()[()] if h5py.check_string_dtype(ds.dtype) else ds[()]
     return pd.DataFrame(data)
+
+
+def _same(a: pd.Series, b: pd.Series) -> bool:
+    """Equal values, NaN equal to NaN, numbers compared as numbers."""
+    try:
+        return bool(np.all((a.to_numpy() == b.to_numpy()) | (pd.isna(a).to_numpy()
+                                                             & pd.isna(b).to_numpy())))
+    except (TypeError, ValueError):
+        return False
 
 
 def _column_array(column: pd.Series) -> np.ndarray:
@@ -707,6 +790,37 @@ def _open_main(path: Path) -> h5py.File:
     return file
 
 
+def provenance() -> dict:
+    """What made the results besides the config: versions of Python and the numerical
+    libraries, the platform, and the git commit of rodphase when run from a checkout
+    ("+dirty" with uncommitted changes), so that a number can be traced to the code."""
+    import platform
+    import subprocess
+
+    import numba
+    import scipy
+
+    from . import __version__
+
+    commit = "unknown (not a git checkout)"
+    source = Path(__file__).resolve().parent.parent
+    if (source / ".git").exists():
+        try:
+            def git(*args):
+                return subprocess.run(["git", "-C", str(source), *args], capture_output=True,
+                                      text=True, timeout=10, check=True).stdout.strip()
+
+            commit = git("rev-parse", "HEAD")
+            if git("status", "--porcelain", "--untracked-files=no"):
+                commit += "+dirty"
+        except (OSError, subprocess.SubprocessError):
+            pass
+    return {"rodphase": __version__, "git_commit": commit, "python": platform.python_version(),
+            "numpy": np.__version__, "numba": numba.__version__, "scipy": scipy.__version__,
+            "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version,
+            "pandas": pd.__version__, "platform": platform.platform()}
+
+
 def _is_empty_hdf5(path: Path) -> bool:
     try:
         with _h5(path, "r") as f:
@@ -731,7 +845,8 @@ def open_store(path, *, config_text: str, config_hash: str, version: str, kind: 
     try:
         new_attrs = dict(format=FORMAT, format_version=FORMAT_VERSION, rodphase_version=version,
                          kind=kind, config_yaml=config_text, config_hash=config_hash,
-                         created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+                         created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                         provenance=json.dumps(provenance()))
         other, empty = None, path.exists() and _is_empty_hdf5(path)
         if path.exists() and not empty:
             try:
@@ -800,6 +915,12 @@ def read_table(path) -> pd.DataFrame:
     """The per-run table of the store at `path` (see Store.table)."""
     with read_store(path) as store:
         return store.table()
+
+
+def read_histories(path, columns=None, run_ids=None) -> pd.DataFrame:
+    """The time histories of the store at `path` as one long table (see Store.histories)."""
+    with read_store(path) as store:
+        return store.histories(columns, run_ids)
 
 
 def write_table_csv(table, path) -> Path:

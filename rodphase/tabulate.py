@@ -41,21 +41,26 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     return row
 
 
+# what the store's own table already holds for every run
+_RUN_COLUMNS = ("status", "wall_time", "steps")
+
+
 def classify_table(store, **thresholds) -> pd.DataFrame:
-    """Classify every run of an open store: one row per run (nothing written)."""
+    """Classify every run of an open store: one row per run, run_id and what the
+    classification adds (the parameters, status and timings are the store's; see
+    Store.table). Nothing is written."""
     rows = []
     for run_id in sorted(store.run_ids()):
-        result = store.read_run(run_id)
-        row = {"run_id": run_id} | store.run_params(run_id) | summarize(result, **thresholds)
-        rows.append(row)
+        row = summarize(store.read_run(run_id), **thresholds)
+        rows.append({"run_id": run_id} | {k: v for k, v in row.items() if k not in _RUN_COLUMNS})
     return pd.DataFrame(rows)
 
 
 def classify_store(store, **thresholds) -> pd.DataFrame:
-    """Classify every run of a store open for writing and store the table in it."""
-    table = classify_table(store, **thresholds)
-    store.write_classification(table)
-    return table
+    """Classify every run of a store open for writing, store the classification in it and
+    return the store's whole table (parameters, status, timings and the classification)."""
+    store.write_classification(classify_table(store, **thresholds))
+    return store.table()
 
 
 def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,

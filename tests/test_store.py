@@ -322,3 +322,79 @@ def test_without_flock_or_fallocate_the_fallbacks_hold(tmp_path, monkeypatch):
     assert not st.lock_path(path).exists()
     with open_(path) as store:
         np.testing.assert_array_equal(store.read_run("a").positions, fake_result().positions)
+
+
+def _demo_like_store(path):
+    """A store shaped like the demo's: four runs with Lk/Tw/Wr histories, classified."""
+    with open_(path) as store:
+        for i in range(4):
+            result = fake_result(seed=i)
+            result.history["twist"] = result.history["link"] - 0.1
+            result.history["writhe"] = np.full_like(result.history["link"], 0.1)
+            result.history["time"] = np.arange(len(result.history["time"])) * 5.0
+            result.diagnostics["dt"] = 1e-4
+            store.write_run(f"run-{i:05d}", {"twist_density": 0.4 * i, "extension": 1.1},
+                            result, {"wall_time": 1.0})
+        store.write_classification(pd.DataFrame({"run_id": [f"run-{i:05d}" for i in range(4)],
+                                                 "phase": ["straight"] * 4,
+                                                 "alignment": [np.nan] * 4}))
+
+
+def test_the_reading_examples_of_the_data_format_page_run_as_written(tmp_path, monkeypatch):
+    import re
+
+    page = (Path(__file__).parent.parent / "docs" / "data-format.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", page[page.index("## Reading without"):], re.S)
+    assert len(blocks) == 3
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "out").mkdir()
+    _demo_like_store(tmp_path / "out" / "quick.h5")
+    for block in blocks:
+        exec(compile(block, "data-format.md", "exec"), {})
+
+
+def test_arrays_have_units_and_named_dimensions_and_the_file_its_provenance(tmp_path):
+    import json
+
+    import xarray as xr
+
+    path = tmp_path / "s.h5"
+    _demo_like_store(path)
+    rod = xr.open_dataset(path, group="runs/run-00001", engine="h5netcdf")
+    assert rod.positions.dims == ("node", "xyz") and rod.positions.attrs["units"] == "m"
+    assert rod.directors.dims == ("element", "director", "xyz")
+    assert rod.radii.dims == ("element",) and rod.radii.attrs["units"] == "m"
+    history = xr.open_dataset(path, group="runs/run-00001/history", engine="h5netcdf")
+    assert history.end_force.dims == ("time",) and history.end_force.attrs["units"] == "N"
+    assert history.writhe.attrs["units"] == "turns" and history.time.attrs["units"] == "s"
+    snapshots = xr.open_dataset(path, group="runs/run-00001/snapshots", engine="h5netcdf")
+    assert snapshots.positions.dims == ("time", "node", "xyz")
+    np.testing.assert_array_equal(snapshots.positions, fake_result(seed=1).snapshot_positions)
+    table = xr.open_dataset(path, group="classification", engine="h5netcdf")
+    assert table.phase.dims == ("run_id",)
+    every = set()
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: every.add(name) if isinstance(obj, h5py.Dataset)
+                     and "units" not in obj.attrs and not name.startswith("classification")
+                     else None)
+        info = json.loads(f.attrs["provenance"])
+    assert every == set()  # every array of every run says its unit
+    assert {"python", "numpy", "numba", "h5py", "hdf5", "git_commit"} <= set(info)
+
+
+def test_long_histories_and_a_table_without_repeated_columns(tmp_path):
+    path = tmp_path / "s.h5"
+    _demo_like_store(path)
+    with open_(path) as store:  # a classification that repeats status and a parameter
+        store.write_classification(pd.DataFrame({
+            "run_id": [f"run-{i:05d}" for i in range(4)], "status": ["ok"] * 4,
+            "twist_density": [0.4 * i for i in range(4)], "phase": ["mixed"] * 4}))
+    table = st.read_table(path)
+    assert not [c for c in table.columns if c.endswith("_classified")]
+    assert list(table["phase"]) == ["mixed"] * 4
+    long = st.read_histories(path, columns=["time", "writhe"])
+    assert len(long) == 4 * 5 and list(long.columns[:3]) == ["run_id", "row", "status"]
+    assert set(long.columns) == {"run_id", "row", "status", "time", "writhe", "twist_density",
+                                 "extension"}
+    assert long.groupby("run_id")["twist_density"].first().tolist() == [0.0, 0.4, 0.8,
+                                                                         0.4 * 3]
