@@ -498,10 +498,25 @@ def load_scene(path: str | Path, overrides=(), registered=None) -> Frozen:
     return validate_scene(apply_overrides(read_yaml(path), list(overrides)), registered)
 
 
+def resolve_sweep_path(name: str | Path) -> Path:
+    """A sweep file: a path, or the name of a shipped sweep (`quick`, `fig3_paper`, ...; also
+    `configs/quick.yaml` as the README writes it, when rodphase is installed elsewhere)."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    stem = path.name[:-5] if path.name.endswith(".yaml") else path.name
+    shipped = PACKAGE_CONFIGS / f"{stem}.yaml"
+    if shipped.is_file() and path.parent in (Path("."), Path("configs")):
+        return shipped
+    names = sorted(p.stem for p in PACKAGE_CONFIGS.glob("*.yaml"))
+    raise ConfigError("sweep file", str(name), "a YAML file path or a shipped sweep: "
+                      + ", ".join(names))
+
+
 def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen, Frozen]:
-    """(sweep, base scene) from a sweep file. Overrides under `sweep.` go to the sweep, all
-    others to the scene (after the sweep's own `set`)."""
-    path = Path(path)
+    """(sweep, base scene) from a sweep file or a shipped sweep's name. Overrides under
+    `sweep.` go to the sweep, all others to the scene (after the sweep's own `set`)."""
+    path = resolve_sweep_path(path)
     data = read_yaml(path)
     sweep_over = [(k[len("sweep."):], v) for k, v in overrides if k.startswith("sweep.")]
     scene_over = [(k, v) for k, v in overrides if not k.startswith("sweep.")]

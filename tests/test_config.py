@@ -284,3 +284,19 @@ def test_run_checks_its_output_before_simulating(tmp_path):
     result = run_cli(["run", "twist_under_load", "-o", str(blocker / "out.h5")])
     assert result.exit_code == 2 and result.output.startswith("error: --output")
     assert "Running" not in result.output
+
+
+def test_config_prints_the_resolved_scene_and_sweep_and_shipped_sweeps_go_by_name(tmp_path):
+    result = run_cli(["config", "twist_under_load", "--set", "rod.elements=9"])
+    assert result.exit_code == 0
+    printed = yaml.safe_load(result.output)["scene"]
+    assert printed["rod"]["elements"] == 9 and printed["solver"]["damping"] == 20.0
+    result = run_cli(["config", "quick", "--set", "sweep.samples=3"])
+    both = yaml.safe_load(result.output)
+    assert both["sweep"]["samples"] == 3 and both["scene"]["rod"]["elements"] == 64
+    # by name, and as the README writes it from any folder, not only the checkout
+    for name in ("quick", "configs/quick.yaml"):
+        sweep, _ = C.load_sweep(name, [], SCENES)
+        assert sweep.samples == 24
+    with pytest.raises(C.ConfigError, match="shipped sweep: .*quick"):
+        C.load_sweep(str(tmp_path / "missing.yaml"), [], SCENES)
