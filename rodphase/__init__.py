@@ -1,3 +1,20 @@
-"""rodphase: phase diagrams of stretched and twisted soft filaments."""
+"""rodphase: phase diagrams of stretched and twisted soft filaments.
+
+From Python: rodphase.load, run, run_sweep, classify_file, open, table, histories (see
+rodphase.api);
+from the shell: the `rodphase` command.
+"""
 
 __version__ = "0.1.0"
+
+_API = ("classify_file", "histories", "load", "load_sweep", "open", "run", "run_sweep", "table")
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name):
+    # imported on first use: `rodphase --help` and the workers need not load the API
+    if name in _API:
+        from . import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'rodphase' has no attribute {name!r}")

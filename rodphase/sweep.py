@@ -84,6 +84,9 @@ class Job:
     params: list[dict]
     scene: dict  # plain, validated scene
     twist_targets: list[float] | None = None  # turns, ascending, one per run id
+    # a scene builder registered at run time (not one of rodphase's): the workers are other
+    # processes that never saw the registration, so the job carries it
+    builder: Callable | None = None
 
 
 @contextmanager
@@ -135,6 +138,10 @@ def run_scene(scene_plain: dict, *, topology: bool | None = None,
 
 def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
     """Worker entry point: one (run_id, params, result or None, error text) per sample."""
+    if job.builder is not None:
+        from .scenes import SCENES
+
+        SCENES[job.scene["scene"]] = job.builder  # the latest definition, in a reused worker too
     with single_threaded_numba():
         try:
             result = run_scene(job.scene, twist_targets=job.twist_targets)
@@ -197,6 +204,7 @@ def plan(sweep, scene) -> list[Job]:
     group is one run that twists through its twist densities in order, relaxing to
     equilibrium at each, so k samples cost about one run.
     """
+    builder = _registered_builder(scene.scene)
     points = sample_points(sweep)
     checked = []
     for index, point in enumerate(points):
@@ -207,7 +215,7 @@ def plan(sweep, scene) -> list[Job]:
                                 exc.allowed) from None
         checked.append((f"run-{index:05d}", dict(point), cfg))
     if sweep.sampler != "continuation":
-        return [Job([rid], [p], cfg.plain()) for rid, p, cfg in checked]
+        return [Job([rid], [p], cfg.plain(), builder=builder) for rid, p, cfg in checked]
     twist_axis = next((a for a in ("twist_density", "twist_density_current") if a in sweep.axes),
                       None)
     if twist_axis is None:
@@ -220,8 +228,17 @@ def plan(sweep, scene) -> list[Job]:
     for members in groups.values():
         members.sort(key=lambda m: m[1][twist_axis])
         jobs.append(Job([m[0] for m in members], [m[1] for m in members], members[0][2].plain(),
-                        twist_targets=[C.twist_turns(m[2]) for m in members]))
+                        twist_targets=[C.twist_turns(m[2]) for m in members], builder=builder))
     return jobs
+
+
+def _registered_builder(name: str) -> Callable | None:
+    """The builder of a scene registered at run time, or None for a shipped scene (every
+    worker has those)."""
+    from . import scenes
+
+    builder = scenes.SCENES.get(name)
+    return None if builder is None or builder.__module__ == scenes.__name__ else builder
 
 
 def _describe(point: dict) -> str:
@@ -570,6 +587,7 @@ def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
     lo = np.array([sweep.axes[k][0] for k in names])
     span = np.array([sweep.axes[k][1] - sweep.axes[k][0] for k in names])
     first = max(4, sweep.samples // 3)
+    builder = _registered_builder(scene.scene)
     unit = list(_lhs(sweep.axes, first, sweep.seed))
     rng = np.random.default_rng(sweep.seed + 1)
     phases: dict[str, str] = {}
@@ -578,7 +596,7 @@ def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
         for index, u in enumerate(unit):
             point = {k: float(v) for k, v in zip(names, lo + np.asarray(u) * span)}
             cfg = scene_for(scene, point)
-            jobs.append(Job([f"run-{index:05d}"], [point], cfg.plain()))
+            jobs.append(Job([f"run-{index:05d}"], [point], cfg.plain(), builder=builder))
         yield jobs
         for job in jobs:
             rid = job.run_ids[0]
