@@ -58,13 +58,20 @@ def _overrides(items) -> list:
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="rodphase")
-def main():
+@click.option("-v", "--verbose", count=True,
+              help="Log what happens to stderr: -v each stored run, merge and retry; -vv more.")
+def main(verbose):
     """Shapes of stretched and twisted soft filaments: simulate, classify, map phases.
 
     A scene is one experiment (YAML); a sweep samples a scene over twist density Φa and
     extension L/L0 and writes every run to one HDF5 file, which `classify` labels
     (straight, plectoneme, solenoid, mixed) and `plot` draws.
     """
+    if verbose:
+        import logging
+
+        logging.basicConfig(level=logging.INFO if verbose == 1 else logging.DEBUG,
+                            format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
 @main.command()
@@ -284,14 +291,20 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background):
 @click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
 @click.option("--run", "run_id", required=True, help="Run id (see `rodphase classify`).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Movie file: .mp4 when ffmpeg is installed, else .gif.")
+              help="Movie file: .gif, or .mp4 when ffmpeg is installed.")
 @click.option("--fps", default=10, show_default=True, type=click.IntRange(1, 120))
 @reports_errors
 def movie(store_file, run_id, output, fps):
     """Animate one run's snapshots (3D rod)."""
+    import shutil
+
     from . import plot as P
     from .store import read_store
 
+    if Path(output).suffix.lower() != ".gif" and shutil.which("ffmpeg") is None:
+        # writing a GIF under another name (or beside it) would surprise: say it instead
+        raise C.ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
+                            "installed (apt install ffmpeg, conda install ffmpeg)")
     _make_parent(output)
     with read_store(store_file) as store:
         result = store.read_run(run_id)

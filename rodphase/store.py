@@ -28,6 +28,7 @@ import contextlib
 import errno
 import io
 import json
+import logging
 import math
 import os
 import shutil
@@ -46,6 +47,8 @@ except ImportError:  # Windows: the lock falls back to a file created exclusivel
     fcntl = None
 
 from .result import RunResult, history_unit
+
+log = logging.getLogger(__name__)
 
 FORMAT = "rodphase-store"
 FORMAT_VERSION = 2  # 2: runs arrive through OUT.h5.parts/; the file's own layout is that of 1
@@ -529,6 +532,8 @@ class Store:
             self._refresh()
             raise
         self._replace = False
+        if parts:
+            log.info("merged %d run(s) into %s", len(parts), self._path)
         for part in list(parts.values()) + self._foreign_parts:
             with contextlib.suppress(OSError):
                 part.unlink()

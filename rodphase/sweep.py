@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import logging
 import math
 import os
 import re
@@ -27,6 +28,8 @@ from . import __version__
 from . import config as C
 from .result import RunResult
 from .rod.simulate import current_radii
+
+log = logging.getLogger(__name__)
 
 # ---------------------------------------------------------------- samplers
 
@@ -359,6 +362,8 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                 except Exception as exc:
                     died = pool.worker_died(exc)
                     if died and deaths.get(id(job), 0) < WORKER_DEATH_RETRIES:
+                        log.warning("a worker died under %s (%s): running it again",
+                                    ", ".join(job.run_ids), died)
                         deaths[id(job)] = deaths.get(id(job), 0) + 1
                         waiting.append(job)  # run it again first
                         continue
@@ -372,6 +377,7 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                         result = error_result(job.scene, error)
                     store.write_run(run_id, params, result,
                                     {"wall_time": result.diagnostics.get("wall_time", 0.0)})
+                    log.info("stored %s: %s", run_id, result.status)
                     if result.ok:
                         report.done += 1
                     else:
@@ -509,7 +515,8 @@ def _dask_pool(scheduler: str | None, jobs: int) -> _DaskPool:
             raise C.ConfigError("--scheduler", scheduler,
                                 f"a Dask scheduler that answers within {SCHEDULER_TIMEOUT} s "
                                 f"(connecting failed: {str(exc).splitlines()[0][:120]})") from None
-        return _DaskPool(client, None, f"on Dask at {scheduler}")
+        return _DaskPool(client, None, f"on Dask at {scheduler} (dashboard "
+                         f"{client.dashboard_link or 'off'})")
     cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address=None)
     return _DaskPool(Client(cluster), cluster, "on a local Dask cluster")

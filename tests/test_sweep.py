@@ -242,6 +242,18 @@ def test_run_then_every_plot_kind_and_a_movie(tmp_path):
     assert result.exit_code == 2 and "nope" in result.output
 
 
+def test_an_mp4_without_ffmpeg_is_an_error_not_a_gif(tmp_path, monkeypatch):
+    import shutil
+
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    store = tmp_path / "any.h5"
+    store.write_bytes(b"checked after the output")
+    result = CliRunner().invoke(main, ["movie", str(store), "--run", "run", "-o",
+                                       str(tmp_path / "rod.mp4")])
+    assert result.exit_code == 2 and "error: --output" in result.output
+    assert "ffmpeg" in result.output and sorted(p.name for p in tmp_path.iterdir()) == ["any.h5"]
+
+
 def test_an_under_resolved_run_is_run_again_with_more_elements():
     # Φa = 1.2 on 12 elements is 4 rad of twist per element: the resolution guard stops it.
     # With solver.refine_up_to the same point is rerun at 24, then 48 elements, where it
