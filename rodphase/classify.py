@@ -10,19 +10,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from .analysis import partner_signs, partners
 
 __all__ = ["PHASES", "alignment", "phase", "phase_code"]
 
 #: Phase names; their index is the integer code used for storage.
 PHASES = ("straight", "plectoneme", "solenoid", "mixed")
-
-
-def _positive(name, value):
-    v = float(value)
-    if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    return v
 
 
 def alignment(points, radius, rest_length=None, epsilon=0.2, min_separation=None) -> float:
@@ -31,56 +25,14 @@ def alignment(points, radius, rest_length=None, epsilon=0.2, min_separation=None
     Elements i and k count as neighbours when their midpoints are closer than
     (2 + epsilon) * radius and |k - i| > min_separation, by default 5 n radius / rest_length
     (rest_length defaults to the polyline length of `points`). Each element takes its
-    nearest such neighbour. Returns NaN when no element has one (a straight or open shape).
+    nearest such neighbour (`rodphase.analysis.partners`). Returns NaN when no element has
+    one (a straight or open shape).
     """
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 2:
-        raise ValueError(f"points must have shape (n+1, 3) with n >= 1, got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ValueError("points must be finite")
-    a = _positive("radius", radius)
-    eps = float(epsilon)
-    if not (math.isfinite(eps) and eps > -2.0):
-        raise ValueError(f"epsilon must be a finite number > -2, got {epsilon!r}")
-    e = np.diff(p, axis=0)
-    n = e.shape[0]
-    if min_separation is None:
-        L0 = (
-            np.linalg.norm(e, axis=1).sum()
-            if rest_length is None
-            else _positive("rest_length", rest_length)
-        )
-        if not L0 > 0.0:
-            raise ValueError("points have zero length; give rest_length")
-        gap = 5.0 * n * a / L0
-    else:
-        gap = float(min_separation)
-        if not (math.isfinite(gap) and gap >= 0.0):
-            raise ValueError(f"min_separation must be a finite number >= 0, got {min_separation!r}")
-
-    x = 0.5 * (p[1:] + p[:-1])
-    cutoff = (2.0 + eps) * a
-    pairs = cKDTree(x).query_pairs(cutoff, output_type="ndarray")
-    if len(pairs) == 0:
+    partner = partners(points, radius, rest_length, epsilon, min_separation)
+    paired = partner >= 0
+    if not np.any(paired):
         return math.nan
-    i, k = pairs[:, 0], pairs[:, 1]
-    d = np.linalg.norm(x[k] - x[i], axis=1)
-    # query_pairs includes the boundary; the paper's conditions are both strict.
-    keep = (np.abs(k - i) > gap) & (d < cutoff)
-    if not np.any(keep):
-        return math.nan
-    i, k, d = i[keep], k[keep], d[keep]
-    # Each pair serves both of its elements: take the nearest partner of every element.
-    src = np.concatenate([i, k])
-    dst = np.concatenate([k, i])
-    dist = np.concatenate([d, d])
-    order = np.lexsort((dst, dist, src))  # by element, then distance, ties to lower index
-    src, dst = src[order], dst[order]
-    first = np.ones(src.shape[0], dtype=bool)
-    first[1:] = src[1:] != src[:-1]
-    src, dst = src[first], dst[first]
-    signs = np.sign(np.einsum("ij,ij->i", e[src], e[dst]))
-    return float(signs.mean())
+    return float(partner_signs(points, partner)[paired].mean())
 
 
 def _threshold(name, value):

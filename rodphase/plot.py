@@ -1,10 +1,14 @@
 """Figures: phase map, Lk/Tw/Wr curves, force–displacement, rod shapes, movies.
 
-Every function takes data (a DataFrame, arrays, a history dict or a RunResult) and a path,
-writes one file and returns its path. Nothing here simulates or opens HDF5 files.
+Every figure function takes data (a DataFrame, arrays, a history dict or a RunResult),
+draws into the axes it is given (`ax=`, or `axes=` for several panels) or else into a new
+figure of its own, saves that figure when it is given a `path`, and returns the Figure. So
+`phase_map(table, "map.png")` writes a file, and `phase_map(table, ax=ax)` draws into one
+panel of a notebook's figure and writes nothing. Nothing here simulates or opens HDF5 files.
 
-Figures are built on matplotlib's Agg canvas directly (no pyplot): no global figure registry
-to leak, and no dependence on the user's backend or display.
+Figures of their own are built on matplotlib's Agg canvas directly (no pyplot): no global
+figure registry to leak, and no dependence on the user's backend or display. Into the
+user's axes the style (STYLE) applies to what is drawn, not to the axes already made.
 """
 
 from __future__ import annotations
@@ -64,8 +68,33 @@ def _save(fig: Figure, path) -> Path:
     return path
 
 
-def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = None,
-              title: str | None = None, twist: str = "twist_density") -> Path:
+def _root(artist) -> Figure:
+    """The top-level Figure that holds `artist`, an axes or a (sub)figure."""
+    fig = artist if isinstance(artist, Figure) else artist.figure
+    while getattr(fig, "figure", fig) is not fig:
+        fig = fig.figure
+    return fig
+
+
+def _axes(ax, figsize):
+    """(figure, axes) to draw into: the caller's `ax` (and its (sub)figure) when given, else
+    a new figure of `figsize` with one axes."""
+    if ax is not None:
+        return ax.figure, ax
+    fig = _figure(figsize=figsize)
+    return fig, fig.add_subplot()
+
+
+def _done(fig: Figure, path) -> Figure:
+    """Save the whole figure when a path is given; return the top-level Figure."""
+    fig = _root(fig)
+    if path is not None:
+        _save(fig, path)
+    return fig
+
+
+def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | None = None,
+              title: str | None = None, twist: str = "twist_density", ax=None) -> Figure:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
     x = extension L/L0 ("extension"), y = twist density Φa (column `twist`: "twist_density",
@@ -76,6 +105,8 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
     failed otherwise are small black crosses. `experiments` (columns twist_density,
     extension, kind ∈ {plectoneme, solenoid}, optional series) are overlaid in black:
     hollow for plectoneme onsets, solid for solenoid onsets, one marker shape per series.
+    Into a given `ax` the legend goes inside the axes (a figure legend would sit over the
+    caller's other panels) and the colour bar takes its room from `ax`.
     """
     table = table.rename(columns={twist: "twist_density"}) if twist != "twist_density" else table
     missing = [c for c in ("twist_density", "extension") if c not in table.columns]
@@ -91,9 +122,9 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
     creeping = status == "not_converged"
     norm = Normalize(-1.0, 1.0)
 
+    own = ax is None
     with matplotlib.rc_context(STYLE):
-        fig = _figure(figsize=(5.6, 4.6))
-        ax = fig.add_subplot()
+        fig, ax = _axes(ax, (5.6, 4.6))
         handles = []
         names = list(PHASE_MARKERS) + sorted(set(phase[ok]) - set(PHASE_MARKERS))
         for name in names:
@@ -132,21 +163,23 @@ def phase_map(table: pd.DataFrame, path, *, experiments: pd.DataFrame | None = N
                     va="top", fontsize=8)
         bar.ax.text(0.5, 1.02, "solenoid", transform=bar.ax.transAxes, ha="center",
                     va="bottom", fontsize=8)
-        if handles:
+        if handles and own:
             fig.legend(handles=handles, loc="outside upper center",
                        ncols=min(len(handles), 4), frameon=False, handletextpad=0.3,
                        columnspacing=1.2)
-        return _save(fig, path)
+        elif handles:
+            ax.legend(handles=handles, frameon=False, fontsize=7, handletextpad=0.3)
+        return _done(fig, path)
 
 
-def phase_path(paths: dict[str, pd.DataFrame], path, *, background: pd.DataFrame | None = None,
-               title: str | None = None) -> Path:
+def phase_path(paths: dict[str, pd.DataFrame], path=None, *,
+               background: pd.DataFrame | None = None, title: str | None = None,
+               ax=None) -> Figure:
     """Protocols drawn as paths through the phase diagram (L/L0 horizontal, Φa = θ·a0/L0
     vertical), one line per named path table (`tabulate.path_table`), its points marked by
     the phase of the rod there; `background` (a classified sweep table) is drawn faintly."""
     with matplotlib.rc_context(STYLE):
-        fig = _figure(figsize=(5.6, 4.4))
-        ax = fig.add_subplot()
+        fig, ax = _axes(ax, (5.6, 4.4))
         if background is not None and len(background):
             column = "twist_density" if "twist_density" in background else "phi_a_rest"
             for name, marker in PHASE_MARKERS.items():
@@ -173,7 +206,7 @@ def phase_path(paths: dict[str, pd.DataFrame], path, *, background: pd.DataFrame
         ax.legend(handles=handles, frameon=False, fontsize=7, loc="best")
         if title:
             ax.set_title(title)
-        return _save(fig, path)
+        return _done(fig, path)
 
 
 def _experiments(ax, experiments: pd.DataFrame) -> list:
@@ -198,8 +231,9 @@ def _experiments(ax, experiments: pd.DataFrame) -> list:
     return handles
 
 
-def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: float | None = None,
-                    rest_length: float | None = None, title: str | None = None) -> Path:
+def topology_curves(result_or_dict: RunResult | dict, path=None, *,
+                    rest_radius: float | None = None, rest_length: float | None = None,
+                    title: str | None = None, ax=None) -> Figure:
     """Link, twist and writhe (turns) against twist density Φa (paper Fig. 2).
 
     Φa = end rotation (rad) × rest radius / rest length. A RunResult supplies both lengths
@@ -225,8 +259,7 @@ def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: floa
     phi_a = units.twist_density_for_rotation(turned, rest_radius, rest_length)
 
     with matplotlib.rc_context(STYLE):
-        fig = _figure(figsize=(5.0, 3.6))
-        ax = fig.add_subplot()
+        fig, ax = _axes(ax, (5.0, 3.6))
         ax.plot(phi_a, history["link"], color=BLACK, lw=1.8, label="link $Lk$")
         ax.plot(phi_a, history["twist"], color=BLUE, lw=1.6, ls="--", label="twist $Tw$")
         ax.plot(phi_a, history["writhe"], color=VERMILLION, lw=1.6, ls="-.",
@@ -251,13 +284,13 @@ def topology_curves(result_or_dict: RunResult | dict, path, *, rest_radius: floa
             heading = f"{heading} (status: {status})".strip()
         if heading:
             ax.set_title(heading)
-        return _save(fig, path)
+        return _done(fig, path)
 
 
-def force_displacement(history: dict | RunResult, path, *, stage: int | None = None,
-                       title: str | None = None) -> Path:
-    """End force against end displacement ΔU (paper Fig. 4a), with writhe on a twin axis if
-    the history has it. `stage` keeps only the rows of that protocol stage; ΔU is measured
+def force_displacement(history: dict | RunResult, path=None, *, stage: int | None = None,
+                       title: str | None = None, ax=None) -> Figure:
+    """End force against end displacement ΔU (paper Fig. 4a), with writhe on a twin axis of
+    `ax` if the history has it. `stage` keeps only the rows of that protocol stage; ΔU is measured
     from the first row kept.
     """
     if isinstance(history, RunResult):
@@ -272,8 +305,7 @@ def force_displacement(history: dict | RunResult, path, *, stage: int | None = N
     force = np.asarray(history["end_force"])[rows]
 
     with matplotlib.rc_context(STYLE):
-        fig = _figure(figsize=(5.0, 3.6))
-        ax = fig.add_subplot()
+        fig, ax = _axes(ax, (5.0, 3.6))
         lines = ax.plot(displacement, force, color=BLACK, lw=1.8, label="end force $F$")
         ax.set_xlabel(r"end displacement $\Delta U$ (m)")
         ax.set_ylabel(r"end force $F$ (N)")
@@ -287,14 +319,16 @@ def force_displacement(history: dict | RunResult, path, *, stage: int | None = N
             ax.legend(handles=lines, frameon=False)
         if title:
             ax.set_title(title)
-        return _save(fig, path)
+        return _done(fig, path)
 
 
-def hat_curve(result: RunResult, path, *, title: str | None = None) -> Path:
+def hat_curve(result: RunResult, path=None, *, title: str | None = None,
+              axes=None) -> Figure:
     """The hat curve: extension L/L0 and end torque against the turns put in, at constant
     force, one colour per protocol stage (up, down, back), with the buckling moments of the
     straight rod (clamped Greenhill, and 2√(BF) of a long rod) for the stretched rod
-    (B/e², length e·L0 of the incompressible law)."""
+    (B/e², length e·L0 of the incompressible law). `axes`: the (extension, torque) pair of
+    axes to draw into (default: a new figure, the two panels one above the other)."""
     from .theory import stretched_rod_buckling_moments
 
     h, d = result.history, result.diagnostics
@@ -309,8 +343,12 @@ def hat_curve(result: RunResult, path, *, title: str | None = None) -> Path:
     colours = [BLACK, BLUE, VERMILLION, "0.5"]
 
     with matplotlib.rc_context(STYLE):
-        fig = _figure(figsize=(5.0, 5.2))
-        top, bottom = fig.subplots(2, 1, sharex=True)
+        if axes is None:
+            fig = _figure(figsize=(5.0, 5.2))
+            top, bottom = fig.subplots(2, 1, sharex=True)
+        else:
+            top, bottom = axes
+            fig = top.figure
         for k, label in enumerate(labels):
             if label == "load":
                 continue
@@ -329,15 +367,16 @@ def hat_curve(result: RunResult, path, *, title: str | None = None) -> Path:
         top.legend(frameon=False, fontsize=8)
         bottom.legend(frameon=False, fontsize=8)
         top.set_title(title or f"hat curve at F = {force:.3g} N")
-        return _save(fig, path)
+        return _done(fig, path)
 
 
 # --- rod shapes ---------------------------------------------------------------------------
 
-def control_response(history: dict | RunResult, path, *, title: str | None = None) -> Path:
+def control_response(history: dict | RunResult, path=None, *, title: str | None = None,
+                     ax=None) -> Figure:
     """Response to a material control (paper Fig 4b, 4c): end displacement ΔU and the changes
     ΔWr, ΔTw against the control that moves (stiffness factor E/E0, else radius factor a/a0),
-    from the first row where it starts to move."""
+    from the first row where it starts to move; ΔWr and ΔTw on a twin axis of `ax`."""
     history = history.history if isinstance(history, RunResult) else history
     control = next((k for k in ("stiffness_factor", "radius_factor")
                     if np.ptp(np.asarray(history.get(k, [1.0]))) > 0), None)
@@ -347,8 +386,7 @@ def control_response(history: dict | RunResult, path, *, title: str | None = Non
     start = max(int(np.argmax(x != x[0])) - 1, 0)
     label = {"stiffness_factor": r"stiffness $E/E_0$", "radius_factor": r"radius $a/a_0$"}[control]
     with matplotlib.rc_context(STYLE):
-        fig = _figure(figsize=(5.2, 3.6))
-        ax = fig.add_subplot()
+        fig, ax = _axes(ax, (5.2, 3.6))
         u = np.asarray(history["end_displacement"])
         ax.plot(x[start:], 1e3 * (u[start:] - u[start]), color=BLACK, lw=1.8,
                 label=r"end displacement $\Delta U$")
@@ -367,7 +405,7 @@ def control_response(history: dict | RunResult, path, *, title: str | None = Non
         ax.legend(handles=handles, frameon=False, loc="best")
         if title:
             ax.set_title(title)
-        return _save(fig, path)
+        return _done(fig, path)
 
 
 def _upright(positions: np.ndarray, axis: np.ndarray | None = None) -> np.ndarray:
@@ -408,6 +446,11 @@ def _rod_axes(fig: Figure, centre_x: float, bottom: float, centre: np.ndarray,
     w, h = fig.get_size_inches()
     rect = ((centre_x - VIEW_HEIGHT / 2) / w, bottom / h, VIEW_HEIGHT / w, VIEW_HEIGHT / h)
     ax = fig.add_axes(rect, projection="3d", computed_zorder=False)
+    return _rod_view(ax, centre, half, zoom)
+
+
+def _rod_view(ax, centre: np.ndarray, half: np.ndarray, zoom: float = 1.0):
+    """Set a 3D axes to show the box `centre` ± `half` at equal scale, in the common view."""
     for setter, c, d in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre, half):
         setter(c - d, c + d)
     # equal scale on all three axes; orthographic so a tube is equally thick near and far
@@ -474,11 +517,15 @@ def _draw_rod(ax, positions, width, collection=None):
     return collection
 
 
-def shape_grid(results: list[tuple[str, np.ndarray, float]], path, *, ncols: int = 6) -> Path:
+def shape_grid(results: list[tuple[str, np.ndarray, float]], path=None, *, ncols: int = 6,
+               axes=None) -> Figure:
     """Final rod shapes, one small 3D view each, drawn as tubes of the given radius.
 
     `results` holds (label, positions (n+1, 3) in m, radius in m). Each rod is turned so that
-    its end-to-end axis points up; all views share one scale so sizes compare.
+    its end-to-end axis points up; all views share one scale so sizes compare. Without
+    `axes` the views are laid out side by side, `ncols` a row, each cell as wide as the rods
+    need; `axes` is instead one 3D axes per rod (projection="3d") to draw into, each
+    titled with its label.
     """
     if not results:
         raise ValueError("shape_grid needs at least one (label, positions, radius)")
@@ -487,6 +534,8 @@ def shape_grid(results: list[tuple[str, np.ndarray, float]], path, *, ncols: int
     # one box for all views, the two lateral axes alike so no direction looks squashed
     half = np.max([_box(p)[1] for p in shapes], axis=0) + pad
     half[:2] = half[:2].max()
+    if axes is not None:
+        return _shapes_into(results, shapes, half, list(axes), path)
     ncols = min(ncols, len(results))
     nrows = -(-len(results) // ncols)
     zoom, cell_w = _fit_view(half)
@@ -506,7 +555,25 @@ def shape_grid(results: list[tuple[str, np.ndarray, float]], path, *, ncols: int
         fig.canvas.draw()  # final axes sizes, for the line widths
         for ax, shape, radius in views:
             _draw_rod(ax, shape, _line_width(fig, ax, radius))
-        return _save(fig, path)
+        return _done(fig, path)
+
+
+def _shapes_into(results, shapes, half, axes, path) -> Figure:
+    """shape_grid into the caller's 3D axes (one per rod)."""
+    if len(axes) != len(results):
+        raise ValueError(f"shape_grid got {len(axes)} axes for {len(results)} rods")
+    if any(getattr(ax, "name", "") != "3d" for ax in axes):
+        raise ValueError("shape_grid draws into 3D axes: make them with projection='3d'")
+    fig = _root(axes[0])
+    with matplotlib.rc_context(STYLE):
+        for ax, (label, _, _), shape in zip(axes, results, shapes):
+            _rod_view(ax, _box(shape)[0], half)
+            ax.set_title(label, fontsize=9)
+        # the tube widths need the axes' final sizes: lay out without rendering pixels
+        fig.draw_without_rendering()
+        for ax, (_, _, radius), shape in zip(axes, results, shapes):
+            _draw_rod(ax, shape, _line_width(fig, ax, radius))
+        return _done(fig, path)
 
 
 def movie(snapshot_positions: np.ndarray, radius: float, path, fps: int = 10, *,

@@ -28,8 +28,20 @@ from pathlib import Path
 
 import numpy as np
 
-from rodphase import __version__
+from rodphase import __version__, units
 from rodphase import config as C
+from rodphase.analysis import (
+    bursts,
+    coil_height,
+    free_coil_height,
+    local_alignment,
+    plectoneme_turns,
+    sawtooth_drops,
+    smooth,
+    solenoid_geometry,
+    stage_rows,
+)
+from rodphase.analysis import twist_density as phi_a
 from rodphase.result import rotation_put_in
 from rodphase.scenes import SCENES
 
@@ -45,7 +57,7 @@ FIGURES: dict[str, list[tuple[str, str, list]]] = {
     "figS3": [("run", "figS3_escape", [])],
 }
 DPI = 130  # documentation figures stay well under 300 kB
-TURN = 2 * math.pi
+TURN = units.TURN
 
 
 # ------------------------------------------------------------------ running
@@ -100,141 +112,7 @@ def scene_cfg(name: str, rid: str, sets: list):
 
 
 # ------------------------------------------------------------------ measurements
-
-def phi_a(result) -> np.ndarray:
-    d = result.diagnostics
-    return rotation_put_in(result.history) * d["rest_radius"] / d["rest_length"]
-
-
-def stage_rows(result, label_start: str) -> np.ndarray:
-    """Boolean mask of the history rows of the stages whose label starts with `label_start`."""
-    labels = [s["label"] for s in result.diagnostics["stages"]]
-    wanted = [i for i, lab in enumerate(labels) if lab.startswith(label_start)]
-    return np.isin(np.asarray(result.history["stage"]), wanted)
-
-
-def smooth(y: np.ndarray, width: int) -> np.ndarray:
-    """Centred running mean over `width` rows (edges use the rows available)."""
-    width = max(1, int(width))
-    kernel = np.ones(width)
-    num = np.convolve(y, kernel, "same")
-    den = np.convolve(np.ones_like(y), kernel, "same")
-    return num / den
-
-
-def bursts(x: np.ndarray, y: np.ndarray, width: int, min_gain: float = 0.1,
-           contrast: float = 1.5) -> list[dict]:
-    """Steps of y along x: its rate dy/dx, smoothed over `width` rows, splits at its local
-    minima (over ±width rows) into segments; a segment is a burst when its peak rate is more
-    than `contrast` times the rate at both ends and y gains at least `min_gain` over it.
-    Returns each burst's start, end, peak position and gain."""
-    rate = smooth(np.gradient(y, x), width)
-    n = len(rate)
-    minima = sorted({0, n - 1} | {i for i in range(1, n - 1)
-                                  if rate[i] == rate[max(0, i - width):i + width + 1].min()})
-    out = []
-    for a, b in zip(minima[:-1], minima[1:]):
-        if b - a < 2:
-            continue
-        peak = a + int(np.argmax(rate[a:b]))
-        gain = float(y[b] - y[a])
-        if gain >= min_gain and rate[peak] > contrast * max(rate[a], rate[b], 1e-12):
-            out.append({"from": float(x[a]), "to": float(x[b]), "at": float(x[peak]),
-                        "gain": gain, "rows": [int(a), int(b)]})
-    return out
-
-
-def partners(points: np.ndarray, radius: float, rest_length: float,
-             epsilon: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
-    """The classifier's partner of each element (-1: none) and sign(e_i·e_k) (NaN: none),
-    with the definitions of rodphase.classify.alignment."""
-    from scipy.spatial import cKDTree
-
-    p = np.asarray(points, float)
-    e = np.diff(p, axis=0)
-    n = len(e)
-    x = 0.5 * (p[1:] + p[:-1])
-    gap = 5.0 * n * radius / rest_length
-    partner = np.full(n, -1)
-    sign = np.full(n, np.nan)
-    tree = cKDTree(x)
-    for i in range(n):
-        best, dist = None, np.inf
-        for k in tree.query_ball_point(x[i], (2.0 + epsilon) * radius):
-            d = float(np.linalg.norm(x[k] - x[i]))
-            if abs(k - i) > gap and d < dist and d < (2.0 + epsilon) * radius:
-                best, dist = k, d
-        if best is not None:
-            partner[i] = best
-            sign[i] = np.sign(e[i] @ e[best])
-    return partner, sign
-
-
-def local_alignment(points, radius, rest_length, epsilon=0.2) -> np.ndarray:
-    return partners(points, radius, rest_length, epsilon)[1]
-
-
-def helix_axis(points: np.ndarray) -> np.ndarray:
-    """Axis of a helix-like polyline: the direction along which its tangents vary least."""
-    t = np.diff(points, axis=0)
-    t /= np.linalg.norm(t, axis=1)[:, None]
-    _, vectors = np.linalg.eigh(np.cov(t.T))
-    axis = vectors[:, 0]
-    return axis if axis @ (points[-1] - points[0]) >= 0 else -axis
-
-
-def solenoid_geometry(points: np.ndarray, radius: float, rest_length: float) -> dict:
-    """Turns, pitch and contour length per turn of the solenoidal part of a rod.
-
-    A solenoid element's classifier partner lies in the neighbouring turn, so |k - i| is the
-    number of elements per turn and |x_k - x_i| the pitch (adjacent turns touch). Elements
-    paired in parallel with |k - i| within 25 % of the median are the coil; the straight
-    tails, which run along the coil's axis and touch its first turns, are left out."""
-    partner, sign = partners(points, radius, rest_length)
-    coil = np.where((sign > 0) & (partner >= 0))[0]
-    if len(coil) < 8:
-        return {}
-    sep = np.abs(partner[coil] - coil)
-    per_turn = float(np.median(sep))
-    coil = coil[np.abs(sep - per_turn) < 0.25 * per_turn]
-    x = 0.5 * (points[1:] + points[:-1])
-    lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    pitch = float(np.median(np.linalg.norm(x[partner[coil]] - x[coil], axis=1)))
-    # the longest stretch of coil elements (gaps of up to 3 elements bridged): the tails that
-    # touch the first turns form stretches of their own
-    breaks = np.where(np.diff(coil) > 3)[0]
-    runs = np.split(coil, breaks + 1)
-    coil = max(runs, key=len)
-    turns = len(coil) / per_turn  # every coil element has a partner in a neighbouring turn
-    return {"elements": [int(coil.min()), int(coil.max())], "elements_per_turn": per_turn,
-            "turns": float(turns),
-            "pitch": pitch, "contour_per_turn": float(per_turn * np.median(lengths[coil]))}
-
-
-def plectoneme_turns(points: np.ndarray, radius: float, rest_length: float) -> dict:
-    """Supercoil turns of the plectonemic part: along one strand (elements i with an
-    antiparallel partner k > i), the turning of the inter-strand vector x_k − x_i about the
-    local plectoneme axis (e_i − e_k), summed; one supercoil turn is one full revolution."""
-    partner, sign = partners(points, radius, rest_length)
-    x = 0.5 * (points[1:] + points[:-1])
-    e = np.diff(points, axis=0)
-    e /= np.linalg.norm(e, axis=1)[:, None]
-    strand = [i for i in range(len(sign)) if sign[i] < 0 and partner[i] > i]
-    total, previous = 0.0, None
-    for i in strand:
-        k = partner[i]
-        axis = e[i] - e[k]
-        axis /= np.linalg.norm(axis)
-        d = x[k] - x[i]
-        d -= axis * (d @ axis)
-        d /= np.linalg.norm(d)
-        if previous is not None:
-            p = previous - axis * (previous @ axis)
-            p /= np.linalg.norm(p)
-            total += math.atan2(axis @ np.cross(p, d), p @ d)
-        previous = d
-    return {"strand_elements": len(strand), "turns": abs(total) / TURN}
-
+# (the measurements themselves live in rodphase.analysis, where they are tested)
 
 def to_builtin(value):
     if isinstance(value, dict):
@@ -309,10 +187,10 @@ def figure2(name: str, results: dict, out: Path, sets: list) -> dict:
     turns_in = float(h["end_rotation"][-1] / TURN)
     m = {
         "status": r.status, "message": r.message,
-        "load_F_C": float(h["applied_force"][-1] / r_buckling(cfg)),
+        "load_F_C": float(h["applied_force"][-1] / C.buckling_force(cfg)),
         "extension_loaded": float(e),
-        "onset_phi_a_rest": onset, "onset_phi_a_current": onset * e ** -1.5,
-        "kirchhoff_onset_current": 1.5 * math.sqrt(h["applied_force"][-1] / r_buckling(cfg))
+        "onset_phi_a_rest": onset, "onset_phi_a_current": units.current_twist_density(onset, e),
+        "kirchhoff_onset_current": 1.5 * math.sqrt(h["applied_force"][-1] / C.buckling_force(cfg))
         * math.pi * a / L0,
         "steps": steps,
         "final": {k: float(h[k][final]) for k in ("link", "twist", "writhe")},
@@ -338,8 +216,8 @@ def figure2(name: str, results: dict, out: Path, sets: list) -> dict:
                 (onset, 0.55 * h["link"][final]), xytext=(-6, 0), textcoords="offset points",
                 ha="right", fontsize=8, color="0.3")
     ax.set_xlabel(r"twist density $\Phi a$ (rest length and radius)")
-    k = e ** -1.5
-    top = ax.secondary_xaxis("top", functions=(lambda v: v * k, lambda v: v / k))
+    top = ax.secondary_xaxis("top", functions=(lambda v: units.current_twist_density(v, e),
+                                               lambda v: units.rest_twist_density(v, e)))
     top.set_xlabel(r"$\Phi a$ of the stretched rod", fontsize=9)
     ax.set_ylabel("turns")
     ax.text(0.98, 0.03, f"{m['load_F_C']:.0f} $F_C$, $L/L_0$ = {e:.3f}\nfinal alignment "
@@ -353,10 +231,6 @@ def figure2(name: str, results: dict, out: Path, sets: list) -> dict:
     shapes(out / f"{name}_shape.png",
            [snapshot_at(r, p, f"Φa {phi[p]:.2f}\nWr {h['writhe'][p]:.2f}") for p in picks])
     return m
-
-
-def r_buckling(cfg) -> float:
-    return C.buckling_force(cfg)
 
 
 # ------------------------------------------------------------------ Fig 4a
@@ -378,22 +252,10 @@ def figure4a(results: dict, out: Path, sets: list) -> dict:
     writhe = h["writhe"][rows]
     # sawtooth drops: a local maximum of the smoothed force (over ±10 mm) followed by a fall
     # of more than 1 F_C before it climbs back above the peak; drops closer than 30 mm merge
-    drops: list[dict] = []
-    for i in range(window, len(fs) - window):
-        if fs[i] < fs[i - window:i + window + 1].max():
-            continue
-        back = np.where(fs[i + 1:] > fs[i])[0]
-        end = i + 1 + (back[0] if len(back) else len(fs) - i - 1)
-        k = i + int(np.argmin(fs[i:end]))
-        if fs[i] - fs[k] < 1.0:
-            continue
-        drop = {"peak_dU": float(u[i]), "peak_F_C": float(fs[i]), "bottom_dU": float(u[k]),
-                "bottom_F_C": float(fs[k]), "writhe_lost": float(writhe[i] - writhe[k])}
-        if drops and drop["peak_dU"] - drops[-1]["peak_dU"] < 0.03:
-            if drop["peak_F_C"] - drop["bottom_F_C"] > drops[-1]["peak_F_C"] - drops[-1]["bottom_F_C"]:
-                drops[-1] = drop
-            continue
-        drops.append(drop)
+    drops = [{"peak_dU": d["peak_x"], "peak_F_C": d["peak_y"], "bottom_dU": d["bottom_x"],
+              "bottom_F_C": d["bottom_y"],
+              "writhe_lost": float(writhe[d["peak_row"]] - writhe[d["bottom_row"]])}
+             for d in sawtooth_drops(u, fs, window, min_drop=1.0, merge=0.03)]
     losses = bursts(u, -writhe, window)
     start = solenoid_geometry(r.snapshot_positions[rows[0]], r.rest_radius, r.diagnostics["rest_length"])
     peaks = [d["peak_dU"] for d in drops]
@@ -499,26 +361,6 @@ def figure4b(results: dict, out: Path, sets: list) -> dict:
 
 # ------------------------------------------------------------------ Fig 4c
 
-def coil_height(points: np.ndarray) -> float:
-    return float((points[-1] - points[0]) @ helix_axis(points))
-
-
-def free_coil_height(cfg, twist_density0: float, factor: np.ndarray) -> np.ndarray:
-    """Height of the unloaded coil without contact: with no load its equilibrium is its rest
-    shape, a helix of the annealed curvature K and the torsion τ = κ3⁰/f − ω, where κ3⁰ is the
-    initial material twist density (the rest twist, scaled by 1/f) and ω = κ3⁰ − τ0 the rate at
-    which the material frame turns relative to the Frenet frame (fixed by the annealed
-    (κ1, κ2), which do not change)."""
-    m = cfg.muscle
-    c = m.pitch / TURN
-    k = m.helix_radius / (m.helix_radius**2 + c**2)
-    tau0 = c / (m.helix_radius**2 + c**2)
-    omega = twist_density0 - tau0
-    tau = twist_density0 / factor - omega
-    length = m.loops * TURN * math.hypot(m.helix_radius, c)
-    return length * tau / np.hypot(k, tau)
-
-
 def figure4c(results: dict, out: Path, sets: list) -> dict:
     from rodphase import plot as P
 
@@ -536,7 +378,8 @@ def figure4c(results: dict, out: Path, sets: list) -> dict:
         contraction = 1.0 - height / h0
         tw0 = float(h["twist"][first])
         kappa30 = tw0 * TURN / fibre
-        analytic = 1.0 - free_coil_height(cfg, kappa30, f) / free_coil_height(cfg, kappa30, np.ones(1))
+        coil = (cfg.muscle.helix_radius, cfg.muscle.pitch, cfg.muscle.loops, kappa30)
+        analytic = 1.0 - free_coil_height(*coil, f) / free_coil_height(*coil, np.ones(1))
         dtw = h["twist"][rows] - tw0
         dwr = h["writhe"][rows] - h["writhe"][first]
         dlk = h["link"][rows] - h["link"][first]

@@ -1,8 +1,10 @@
-"""Plots: each kind writes a non-empty image from synthetic data; bad input is named."""
+"""Plots: each kind writes a non-empty image from synthetic data, or draws into a caller's
+axes and writes nothing; it returns the figure; bad input is named."""
 
 import numpy as np
 import pandas as pd
 import pytest
+from matplotlib.figure import Figure
 
 from rodphase import plot
 from rodphase.result import HISTORY_COLUMNS, RunResult
@@ -12,6 +14,11 @@ PNG_MAGIC = b"\x89PNG"
 
 def is_png(path):
     return path.exists() and path.stat().st_size > 1000 and path.read_bytes()[:4] == PNG_MAGIC
+
+
+def writes_png(fig, path):
+    """A figure function called with a path returns its Figure and writes that file."""
+    return isinstance(fig, Figure) and is_png(path)
 
 
 def helix(n=40, turns=3.0, radius=0.05, length=1.0):
@@ -51,16 +58,16 @@ def sweep_table():
 def test_phase_map(tmp_path):
     experiments = pd.DataFrame({"twist_density": [0.5, 0.9], "extension": [1.05, 1.2],
                                 "kind": ["plectoneme", "solenoid"]})
-    out = plot.phase_map(sweep_table(), tmp_path / "phase.png", experiments=experiments,
+    fig = plot.phase_map(sweep_table(), tmp_path / "phase.png", experiments=experiments,
                          title="quick sweep")
-    assert is_png(out)
+    assert writes_png(fig, tmp_path / "phase.png")
 
 
 def test_phase_map_all_straight_and_failed(tmp_path):
     table = pd.DataFrame({"twist_density": [0.0, 0.2, 0.4], "extension": [1.0, 1.1, 1.2],
                           "status": ["ok", "ok", "unstable"], "alignment": [np.nan] * 3,
                           "phase": ["straight", "straight", None]})
-    assert is_png(plot.phase_map(table, tmp_path / "straight.png"))
+    assert writes_png(plot.phase_map(table, tmp_path / "straight.png"), tmp_path / "straight.png")
 
 
 def test_phase_map_names_missing_columns(tmp_path):
@@ -70,9 +77,10 @@ def test_phase_map_names_missing_columns(tmp_path):
 
 def test_topology_curves(tmp_path):
     result = fake_result()
-    assert is_png(plot.topology_curves(result, tmp_path / "topo.png"))
-    assert is_png(plot.topology_curves(result.history, tmp_path / "topo2.png",
-                                       rest_radius=0.025, rest_length=1.0))
+    assert writes_png(plot.topology_curves(result, tmp_path / "topo.png"), tmp_path / "topo.png")
+    fig = plot.topology_curves(result.history, tmp_path / "topo2.png", rest_radius=0.025,
+                               rest_length=1.0)
+    assert writes_png(fig, tmp_path / "topo2.png")
 
 
 def test_topology_curves_names_missing_keys(tmp_path):
@@ -82,16 +90,18 @@ def test_topology_curves_names_missing_keys(tmp_path):
 
 def test_force_displacement(tmp_path):
     result = fake_result()
-    assert is_png(plot.force_displacement(result.history, tmp_path / "fd.png"))
+    assert writes_png(plot.force_displacement(result.history, tmp_path / "fd.png"),
+                      tmp_path / "fd.png")
     history = {k: v for k, v in result.history.items() if k != "writhe"}
-    assert is_png(plot.force_displacement(history, tmp_path / "fd1.png", stage=1))
+    assert writes_png(plot.force_displacement(history, tmp_path / "fd1.png", stage=1),
+                      tmp_path / "fd1.png")
 
 
 def test_shape_grid(tmp_path):
     straight = np.column_stack([np.zeros(41), np.zeros(41), np.linspace(0, 1.1, 41)])
     shapes = [("straight", straight, 0.025), ("solenoid", helix(turns=8), 0.02),
               ("tilted", helix() @ np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0.0]]), 0.025)]
-    assert is_png(plot.shape_grid(shapes, tmp_path / "shapes.png"))
+    assert writes_png(plot.shape_grid(shapes, tmp_path / "shapes.png"), tmp_path / "shapes.png")
 
 
 def test_movie_gif(tmp_path):
@@ -114,8 +124,8 @@ def test_control_response_draws_a_radius_ramp(tmp_path):
     history = {"radius_factor": np.r_[np.ones(5), np.linspace(1, 2, 25)],
                "stiffness_factor": np.ones(30), "end_displacement": -0.01 * t,
                "writhe": 0.2 * t, "twist": -0.3 * t}
-    path = control_response(history, tmp_path / "r.png")
-    assert path.stat().st_size > 5_000
+    assert isinstance(control_response(history, tmp_path / "r.png"), Figure)
+    assert (tmp_path / "r.png").stat().st_size > 5_000
     with pytest.raises(ValueError, match="neither"):
         control_response({"radius_factor": np.ones(3), "end_displacement": np.zeros(3)},
                          tmp_path / "x.png")
@@ -133,12 +143,13 @@ def test_hat_curve_draws_each_branch_and_marks_escapes(tmp_path):
     h["end_displacement"] = -0.01 * turns**2
     result.diagnostics.update(youngs_modulus=1e6, stages=[{"label": s} for s in
                                                          ("load", "up", "down", "back")])
-    assert is_png(plot.hat_curve(result, tmp_path / "hat.png"))
+    assert writes_png(plot.hat_curve(result, tmp_path / "hat.png"), tmp_path / "hat.png")
     # the escape markers of the Lk/Tw/Wr plot
     result = fake_result(rows=24)
     result.history["link_escapes"] = (np.arange(24) >= 12).astype(float)
     result.history["link"] = result.history["link"] - 2 * result.history["link_escapes"]
-    assert is_png(plot.topology_curves(result, tmp_path / "escape.png"))
+    assert writes_png(plot.topology_curves(result, tmp_path / "escape.png"),
+                      tmp_path / "escape.png")
 
 
 def test_phase_path_draws_a_protocol_through_the_map(tmp_path):
@@ -152,5 +163,122 @@ def test_phase_path_draws_a_protocol_through_the_map(tmp_path):
     h = result.history
     expected = (h["end_rotation"] - h["start_rotation"])[::2] * 0.025
     assert np.allclose(table["twist_density"], expected)
-    assert is_png(plot.phase_path({"pull": table}, tmp_path / "path.png",
-                                  background=sweep_table()))
+    fig = plot.phase_path({"pull": table}, tmp_path / "path.png", background=sweep_table())
+    assert writes_png(fig, tmp_path / "path.png")
+
+
+# --------------------------------------------------------------------------- into given axes
+
+
+@pytest.fixture
+def no_files(tmp_path, monkeypatch):
+    """Run in an empty folder and fail on any save: drawing into axes writes nothing."""
+    monkeypatch.chdir(tmp_path)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a plot given axes and no path must not save")
+
+    monkeypatch.setattr(Figure, "savefig", refuse)
+    yield
+    assert list(tmp_path.iterdir()) == []
+
+
+def user_figure(nrows=1, ncols=2, **kwargs):
+    fig = Figure(figsize=(8, 3), layout="constrained")
+    return fig, fig.subplots(nrows, ncols, squeeze=False, **kwargs).ravel()
+
+
+def points(ax):
+    return sum(len(c.get_offsets()) for c in ax.collections)
+
+
+def test_topology_curves_into_axes(no_files):
+    fig, (left, right) = user_figure()
+    out = plot.topology_curves(fake_result(), ax=right, title="run 3")
+    assert out is fig and right in out.axes
+    assert len(right.lines) == 4  # Lk, Tw, Wr and the zero line
+    assert len(left.lines) == 0 and right.get_title() == "run 3"
+    assert right.get_legend() is not None
+
+
+def test_phase_map_into_axes(no_files):
+    fig, (left, right) = user_figure()
+    out = plot.phase_map(sweep_table(), ax=left)
+    assert out is fig
+    # 4 classified ok runs, 1 creeping run drawn by its shape ("?") and with a dot, 1 failed
+    assert points(left) == 4 + 1 + 1 + 1
+    assert len(out.axes) == 3  # the two panels and the colour bar
+    assert left.get_legend() is not None and not out.legends  # the legend stays in its axes
+    assert points(right) == 0
+
+
+def test_phase_path_into_axes(no_files):
+    from rodphase.tabulate import path_table
+
+    fig, (ax, _) = user_figure()
+    table = path_table(fake_result(rows=12), every=2)
+    out = plot.phase_path({"pull": table, "twist": table}, ax=ax)
+    assert out is fig and len(ax.lines) == 2
+    assert points(ax) == 2 * len(table)
+
+
+def test_force_displacement_into_axes(no_files):
+    fig, (ax, _) = user_figure()
+    out = plot.force_displacement(fake_result().history, ax=ax)
+    assert out is fig and len(ax.lines) == 1
+    assert len(out.axes) == 3  # writhe on a twin of ax
+    twin = [a for a in out.axes if a is not ax and a.get_shared_x_axes().joined(a, ax)]
+    assert len(twin) == 1 and len(twin[0].lines) == 1
+
+
+def test_control_response_into_axes(no_files):
+    t = np.linspace(0, 1, 30)
+    history = {"radius_factor": np.r_[np.ones(5), np.linspace(1, 2, 25)],
+               "end_displacement": -0.01 * t, "writhe": 0.2 * t, "twist": -0.3 * t}
+    fig, (ax, _) = user_figure()
+    out = plot.control_response(history, ax=ax)
+    assert out is fig and len(ax.lines) == 1 and len(out.axes) == 3
+    # from the last row before the control moves: rows 5..29 (row 5 is the ramp's 1.0)
+    assert len(ax.lines[0].get_xdata()) == 25
+
+
+def test_hat_curve_into_axes(no_files):
+    result = fake_result(rows=24)
+    h = result.history
+    turns = np.repeat([0.0, 1.0, -1.0, 0.0], 6)
+    h["end_rotation"] = 2 * np.pi * turns
+    h["stage"] = np.repeat(np.arange(4), 6)
+    h["applied_force"] = np.full(24, 75.0)
+    h["end_torque"] = np.tanh(turns)
+    result.diagnostics.update(youngs_modulus=1e6, stages=[{"label": s} for s in
+                                                         ("load", "up", "down", "back")])
+    fig, (top, bottom) = user_figure(nrows=2, ncols=1)
+    out = plot.hat_curve(result, axes=(top, bottom))
+    assert out is fig and len(out.axes) == 2
+    assert len(top.lines) == 3  # up, down, back (not the load stage)
+    assert len(bottom.lines) == 3 + 4  # the branches and ± two buckling moments
+
+
+def test_shape_grid_into_axes(no_files):
+    fig = Figure(figsize=(6, 3))
+    axes = [fig.add_subplot(1, 2, k + 1, projection="3d") for k in range(2)]
+    out = plot.shape_grid([("a", helix(), 0.025), ("b", helix(turns=8), 0.02)], axes=axes)
+    assert out is fig and len(out.axes) == 2
+    for ax, label in zip(axes, "ab"):
+        assert ax.get_title() == label
+        (tube,) = ax.collections
+        assert len(tube.get_edgecolor()) == 40  # one coloured segment per element
+    with pytest.raises(ValueError, match="2 axes for 1 rods"):
+        plot.shape_grid([("a", helix(), 0.025)], axes=axes)
+
+
+def test_given_axes_and_path_saves_the_callers_figure(tmp_path):
+    fig, (ax, _) = user_figure()
+    out = plot.topology_curves(fake_result(), tmp_path / "both.png", ax=ax)
+    assert out is fig and writes_png(out, tmp_path / "both.png")
+
+
+def test_figure_in_a_subfigure_returns_the_top_figure(no_files):
+    fig = Figure(figsize=(8, 3))
+    ax = fig.subfigures(1, 2)[1].add_subplot()
+    assert plot.topology_curves(fake_result(), ax=ax) is fig
