@@ -37,7 +37,6 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLA
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -58,8 +57,7 @@ from rodphase.rod import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-from test_rod import greenhill_critical_moment
+from rodphase.theory import greenhill_clamped_moment
 
 SAFETIES = (0.5, 0.25)
 
@@ -153,7 +151,7 @@ def greenhill(n: int, safety: float, resolution: float = 0.002) -> dict:
     bending = rod.bending_stiffness
     tension = 100 * bending / rod.length**2
     e = 1.0 / (1.0 - tension / (rod.youngs_modulus * rod.area))
-    m_c = greenhill_critical_moment(tension, e * rod.length, bending / e**2)
+    m_c = greenhill_clamped_moment(tension, e * rod.length, bending / e**2)
     load = load_text()
     cpu_total, steps_total, trials = 0.0, 0, 0
 
