@@ -217,7 +217,14 @@ def _reserve(path: Path, size: int) -> None:
 def _h5(path, mode: str) -> h5py.File:
     # The main file is never written in place (see the module docstring), so HDF5's own
     # locks add nothing and would make a reader fail while a sweep merges.
-    return h5py.File(path, mode, locking=False)
+    try:
+        return h5py.File(path, mode, locking=False)
+    except OSError as exc:
+        if "locking flag values don't match" not in str(exc):
+            raise
+        # the file is open elsewhere in this process with HDF5's default locking (xarray
+        # keeps the files it opened open), and HDF5 refuses a second open with other flags
+        return h5py.File(path, mode)
 
 
 def _check_layout(file: h5py.File, where: str) -> None:

@@ -398,3 +398,19 @@ def test_long_histories_and_a_table_without_repeated_columns(tmp_path):
                                  "extension"}
     assert long.groupby("run_id")["twist_density"].first().tolist() == [0.0, 0.4, 0.8,
                                                                          0.4 * 3]
+
+
+def test_a_store_that_xarray_holds_open_can_still_be_read_and_written(tmp_path):
+    # xarray keeps the files it opened open with HDF5's default locking, and HDF5 refuses to
+    # open the same file again in the process with other flags (seen in the tutorial)
+    import xarray as xr
+
+    path = tmp_path / "s.h5"
+    _demo_like_store(path)
+    held = xr.open_dataset(path, group="runs/run-00000", engine="h5netcdf")
+    held.positions.load()
+    assert len(st.read_table(path)) == 4
+    with open_(path) as store:
+        store.write_run("run-00004", {}, fake_result(), {})
+    assert len(st.read_table(path)) == 5
+    held.close()
