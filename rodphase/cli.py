@@ -227,20 +227,39 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
               "the stretched straight rod, θ·(a0/√e)/(e·L0) = rest Φa / e^1.5.")
 @click.option("--background", type=click.Path(exists=True, dir_okay=False),
               help="With --kind path: a classified sweep file drawn faintly behind the paths.")
+@click.option("--size", default=None, metavar="column|page|W,H",
+              help="Phase map size: a journal's single column (3.4 in wide), full page width "
+                   "(7 in), or width,height in inches.")
+@click.option("--caption/--no-caption", default=True, show_default=True,
+              help="Phase map: a line under it with the sweep's parameters and run counts.")
 @reports_errors
-def plot(store_file, kind, output, run_id, experiments, twist, background):
-    """Draw a figure from OUT.h5."""
+def plot(store_file, kind, output, run_id, experiments, twist, background, size, caption):
+    """Draw a figure from OUT.h5.
+
+    \b
+    Example:
+      rodphase plot out/quick.h5 --kind phase --size column -o phase.pdf
+      rodphase plot out/quick.h5 --kind topology --run run-00003 -o lk.png
+    """
     _make_parent(output)
+    if size is not None and size not in ("column", "page"):
+        try:
+            width, height = (float(v) for v in size.split(","))
+            size = (width, height)
+        except ValueError:
+            raise C.ConfigError("--size", size, "column, page, or width,height in inches "
+                                "(e.g. 3.4,3)") from None
     try:
-        _draw(store_file, kind, output, run_id, experiments, twist, background)
+        _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption)
     except ValueError as exc:
         # a figure that this file's data cannot make (say why, no traceback)
         raise C.ConfigError(f"--kind {kind}", store_file, str(exc)) from None
     click.echo(f"written {output}")
 
 
-def _draw(store_file, kind, output, run_id, experiments, twist, background):
+def _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption):
     import pandas as pd
+    import yaml
 
     from . import plot as P
     from .store import read_store
@@ -253,7 +272,9 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background):
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
-            P.phase_map(table, output, experiments=exp, twist=column)
+            text = (P.sweep_caption(yaml.safe_load(store.attrs.get("config_yaml", "")) or {},
+                                    table) if caption else None)
+            P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size)
         elif kind == "path":
             from .tabulate import path_table
 
@@ -271,14 +292,20 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background):
                     raise C.ConfigError(background, "not classified", "run `rodphase classify` first")
             P.phase_path(paths, output, background=behind)
         elif kind == "shape":
-            ids = store.run_ids()[:12]
-            shapes = [(i, store.read_run(i).positions, store.read_run(i).rest_radius) for i in ids]
+            table = store.table()
+            ids = [run_id] if run_id else P.shape_panels(table)
+            shapes = []
+            for rid in ids:
+                result = store.read_run(rid)
+                shapes.append((P.run_label(table.set_index("run_id").loc[rid]),
+                               result.positions, result.rest_radius))
             P.shape_grid(shapes, output)
         else:
             rid = run_id or store.run_ids()[0]
             result = store.read_run(rid)
+            params = P.params_text(store.run_params(rid))
             if kind == "topology":
-                P.topology_curves(result, output)
+                P.topology_curves(result, output, title=f"{rid}: {params}" if params else rid)
             elif kind == "hat":
                 P.hat_curve(result, output)
             elif kind == "response":
@@ -293,8 +320,10 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background):
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Movie file: .gif, or .mp4 when ffmpeg is installed.")
 @click.option("--fps", default=10, show_default=True, type=click.IntRange(1, 120))
+@click.option("--height", default=None, type=click.FloatRange(0.5, 20),
+              help="Picture height in inches at 150 dpi (default: about 3).")
 @reports_errors
-def movie(store_file, run_id, output, fps):
+def movie(store_file, run_id, output, fps, height):
     """Animate one run's snapshots (3D rod)."""
     import shutil
 
@@ -308,8 +337,44 @@ def movie(store_file, run_id, output, fps):
     _make_parent(output)
     with read_store(store_file) as store:
         result = store.read_run(run_id)
-    path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps)
+    from .analysis import twist_density
+
+    h = result.history
+    rows = len(result.snapshot_positions)
+    phi_a = twist_density(result)[:rows] if "end_rotation" in h else None
+    path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps,
+                   times=h["time"][:rows], twist_density=phi_a, height=height)
     click.echo(f"written {path}")
+
+
+@main.command()
+@click.argument("store_file", metavar="OUT.h5", type=click.Path(exists=True, dir_okay=False))
+@click.option("--run", "run_id", required=True, help="Run id (see `rodphase classify`).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="VTK file (.vtk); with --snapshots the stem of a numbered series.")
+@click.option("--snapshots", is_flag=True, help="Every stored snapshot, one file each.")
+@reports_errors
+def export(store_file, run_id, output, snapshots):
+    """Write a run's rod as VTK polydata for ParaView, VisIt or PyVista (a Tube filter on the
+    point data `radius` renders it as a shaded tube of its real thickness).
+
+    \b
+    Example:
+      rodphase export out/quick.h5 --run run-00003 -o rod.vtk
+      rodphase export run.h5 --run run --snapshots -o frames/rod   # frames/rod_0000.vtk ...
+    """
+    from .export import write_vtk, write_vtk_series
+    from .store import read_store
+
+    _make_parent(output)
+    with read_store(store_file) as store:
+        result = store.read_run(run_id)
+    if snapshots:
+        written = write_vtk_series(output, result.snapshot_positions, result.radii)
+        click.echo(f"written {len(written)} files {written[0]} ... {written[-1]}"
+                   if written else "the run has no snapshots")
+    else:
+        click.echo(f"written {write_vtk(output, result.positions, result.radii, title=run_id)}")
 
 
 @main.command()

@@ -93,8 +93,63 @@ def _done(fig: Figure, path) -> Figure:
     return fig
 
 
+# figure sizes (inches) of a journal's single column and full page width
+SIZES = {"column": (3.4, 3.2), "page": (7.0, 4.6)}
+
+
+def _twist_axis(table: pd.DataFrame, twist: str) -> pd.Series:
+    """The phase map's vertical values: column `twist`, completed from the sample's own
+    parameters where the run left it empty (a run that failed before it had a shape still
+    has the Φa and L/L0 it was sampled at; dropping it would hide the failure)."""
+    y = table[twist].astype(float) if twist in table else pd.Series(np.nan, index=table.index)
+    e = table["extension"].astype(float) if "extension" in table else None
+    rest = table.get("twist_density")
+    current = table.get("twist_density_current")
+    if twist == "phi_a_current":
+        fill = current if current is not None else (
+            units.current_twist_density(rest.astype(float), e)
+            if rest is not None and e is not None else None)
+    else:  # phi_a_rest, or the rest-axis parameter itself
+        fill = rest if rest is not None and twist != "twist_density" else (
+            units.rest_twist_density(current.astype(float), e)
+            if current is not None and e is not None else None)
+    return y.fillna(fill.astype(float)) if fill is not None else y
+
+
+def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
+    """One line saying what a phase map was computed with: the scene, the resolution, the
+    rod and material, the load, the protocol, the sampler, and the runs by status. `config`
+    is a store's resolved config (its config_yaml attribute, parsed)."""
+    scene = config.get("scene", {})
+    sweep = config.get("sweep", {})
+    rod, material = scene.get("rod", {}), scene.get("material", {})
+    loading, solver = scene.get("loading", {}), scene.get("solver", {})
+    parts = [f"{scene.get('scene', '?')}: {rod.get('elements', '?')} elements",
+             f"L0 {rod.get('length', float('nan')):g} m, a0 {rod.get('radius', float('nan')):g} m",
+             f"E {material.get('youngs_modulus', float('nan')):.3g} Pa"
+             + (", incompressible" if material.get("incompressible") else "")]
+    axes = sweep.get("axes", {})
+    if "force_multiple" not in axes and "extension" not in axes:
+        if loading.get("force_multiple") is not None:
+            parts.append(f"load {loading['force_multiple']:g} F_C")
+        elif loading.get("extension") is not None:
+            parts.append(f"L/L0 {loading['extension']:g}")
+    parts.append(f"twisted at {loading.get('twist_rate', float('nan')):g} turns/s, "
+                 f"holds ≤ {solver.get('hold_max_time', float('nan')):g} s to equilibrium "
+                 f"(tolerance {solver.get('hold_tolerance', float('nan')):g}), "
+                 f"damping {solver.get('damping', float('nan')):g}/s")
+    if sweep:
+        parts.append(f"{sweep.get('samples', '?')} {sweep.get('sampler', '?')} samples, "
+                     f"seed {sweep.get('seed', '?')}")
+    if table is not None and "status" in table:
+        counts = table["status"].value_counts()
+        parts.append(", ".join(f"{n} {s}" for s, n in counts.items()))
+    return "; ".join(parts)
+
+
 def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | None = None,
-              title: str | None = None, twist: str = "twist_density", ax=None) -> Figure:
+              title: str | None = None, twist: str = "twist_density", caption: str | None = None,
+              size: tuple[float, float] | str | None = None, ax=None) -> Figure:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
     x = extension L/L0 ("extension"), y = twist density Φa (column `twist`: "twist_density",
@@ -106,12 +161,20 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
     extension, kind ∈ {plectoneme, solenoid}, optional series) are overlaid in black:
     hollow for plectoneme onsets, solid for solenoid onsets, one marker shape per series.
     Into a given `ax` the legend goes inside the axes (a figure legend would sit over the
-    caller's other panels) and the colour bar takes its room from `ax`.
+    caller's other panels) and the colour bar takes its room from `ax`. `caption` is a line
+    under the figure (the sweep's parameters); `size` is (width, height) in inches or
+    "column" / "page" (a journal's single column, full width).
     """
-    table = table.rename(columns={twist: "twist_density"}) if twist != "twist_density" else table
-    missing = [c for c in ("twist_density", "extension") if c not in table.columns]
-    if missing:
-        raise ValueError(f"phase_map needs columns {missing}; the table has {list(table.columns)}")
+    if "extension" not in table.columns:
+        raise ValueError(f"phase_map needs the column 'extension'; the table has "
+                         f"{list(table.columns)}")
+    y = _twist_axis(table, twist)
+    if y.isna().all():
+        raise ValueError(f"phase_map needs twist values in '{twist}' (or the sample's "
+                         f"twist_density / twist_density_current); the table has "
+                         f"{list(table.columns)}")
+    table = table.assign(extension=table["extension"].astype(float)).drop(
+        columns=["twist_density"], errors="ignore").assign(twist_density=y)
     n = len(table)
     status = table["status"] if "status" in table else pd.Series(["ok"] * n, index=table.index)
     phase = table["phase"] if "phase" in table else pd.Series(["?"] * n, index=table.index)
@@ -123,8 +186,14 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
     norm = Normalize(-1.0, 1.0)
 
     own = ax is None
-    with matplotlib.rc_context(STYLE):
-        fig, ax = _axes(ax, (5.6, 4.6))
+    figsize = SIZES.get(size, size) if isinstance(size, str) or size else (5.6, 4.6)
+    if isinstance(size, str) and size not in SIZES:
+        raise ValueError(f"size {size!r}: one of {', '.join(SIZES)}, or (width, height) inches")
+    small = figsize[0] < 4.5
+    with matplotlib.rc_context(STYLE | ({"font.size": 8, "axes.labelsize": 8,
+                                          "legend.fontsize": 7, "xtick.labelsize": 7,
+                                          "ytick.labelsize": 7} if small else {})):
+        fig, ax = _axes(ax, figsize)
         handles = []
         names = list(PHASE_MARKERS) + sorted(set(phase[ok]) - set(PHASE_MARKERS))
         for name in names:
@@ -133,7 +202,8 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                 continue
             marker = PHASE_MARKERS.get(name, OTHER_MARKER)
             ax.scatter(table.loc[rows, "extension"], table.loc[rows, "twist_density"],
-                       c=alignment[rows], cmap=ALIGNMENT_CMAP, norm=norm, marker=marker, s=42,
+                       c=alignment[rows], cmap=ALIGNMENT_CMAP, norm=norm, marker=marker,
+                       s=24 if small else 42,
                        edgecolors="0.25", linewidths=0.5, plotnonfinite=True, zorder=2)
             face = "0.6" if name == "straight" else "0.9"  # straight is the grey of NaN
             handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc=face, mec="0.25",
@@ -159,16 +229,23 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
         bar = fig.colorbar(ScalarMappable(norm, ALIGNMENT_CMAP), ax=ax,
                            ticks=[-1, -0.5, 0, 0.5, 1], aspect=30, pad=0.02)
         bar.set_label("loop alignment")
+        end_size = 6.5 if small else 8
         bar.ax.text(0.5, -0.02, "plectoneme", transform=bar.ax.transAxes, ha="center",
-                    va="top", fontsize=8)
+                    va="top", fontsize=end_size)
         bar.ax.text(0.5, 1.02, "solenoid", transform=bar.ax.transAxes, ha="center",
-                    va="bottom", fontsize=8)
+                    va="bottom", fontsize=end_size)
         if handles and own:
             fig.legend(handles=handles, loc="outside upper center",
-                       ncols=min(len(handles), 4), frameon=False, handletextpad=0.3,
-                       columnspacing=1.2)
+                       ncols=min(len(handles), 2 if small else 4), frameon=False,
+                       handletextpad=0.3, columnspacing=1.2)
         elif handles:
             ax.legend(handles=handles, frameon=False, fontsize=7, handletextpad=0.3)
+        if caption:
+            import textwrap
+
+            width = int(figsize[0] * (17 if small else 15))  # characters per line
+            fig.supxlabel("\n".join(textwrap.wrap(caption, width)), fontsize=6.5, color="0.3",
+                          ha="center")
         return _done(fig, path)
 
 
@@ -239,9 +316,11 @@ def topology_curves(result_or_dict: RunResult | dict, path=None, *,
     Φa = end rotation (rad) × rest radius / rest length. A RunResult supplies both lengths
     (from its diagnostics); a plain history dict needs `rest_radius` and `rest_length` (m).
     """
+    labels = []
     if isinstance(result_or_dict, RunResult):
         history = result_or_dict.history
         diag = result_or_dict.diagnostics
+        labels = [s.get("label", "") for s in diag.get("stages", [])]
         rest_radius = rest_radius or diag.get("rest_radius")
         rest_length = rest_length or diag.get("rest_length",
                                                float(np.sum(result_or_dict.rest_lengths)))
@@ -265,6 +344,7 @@ def topology_curves(result_or_dict: RunResult | dict, path=None, *,
         ax.plot(phi_a, history["writhe"], color=VERMILLION, lw=1.6, ls="-.",
                 label="writhe $Wr$")
         ax.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+        _shade_stages(ax, phi_a, history, labels)
         if "link_escapes" in history:
             # link escape events (a loop slipping over an end): where the counter steps,
             # with the link lost or gained beyond what the clamps put in
@@ -285,6 +365,28 @@ def topology_curves(result_or_dict: RunResult | dict, path=None, *,
         if heading:
             ax.set_title(heading)
         return _done(fig, path)
+
+
+def _shade_stages(ax, x: np.ndarray, history: dict, labels: list[str]) -> None:
+    """Alternate light bands over the x range each protocol stage covers, named inside the
+    top edge, when two or more stages cover a range (a continuation, a hat curve); a stage
+    that keeps x fixed (a hold at constant twist) covers none."""
+    if "stage" not in history or not len(x):
+        return
+    stage = np.asarray(history["stage"])
+    spans = []
+    for k in np.unique(stage):
+        lo, hi = float(np.min(x[stage == k])), float(np.max(x[stage == k]))
+        if hi - lo > 1e-9 * max(1.0, abs(hi)):
+            spans.append((int(k), lo, hi))
+    if len(spans) < 2:
+        return
+    for shaded, (k, lo, hi) in enumerate(spans):
+        if shaded % 2 == 0:
+            ax.axvspan(lo, hi, color="0.94", lw=0, zorder=-1)
+        ax.text(0.5 * (lo + hi), 0.99, labels[k] if k < len(labels) else f"stage {k}",
+                transform=ax.get_xaxis_transform(), ha="center", va="top", fontsize=7,
+                color="0.45")
 
 
 def force_displacement(history: dict | RunResult, path=None, *, stage: int | None = None,
@@ -316,6 +418,12 @@ def force_displacement(history: dict | RunResult, path=None, *, stage: int | Non
                                color=VERMILLION, lw=1.4, ls="--", label="writhe $Wr$")
             twin.set_ylabel("writhe $Wr$ (turns)", color=VERMILLION)
             twin.tick_params(axis="y", colors=VERMILLION)
+            kept = np.asarray(history["writhe"])[rows]
+            if len(kept) and np.ptp(kept) < 0.01:
+                # a writhe that does not change: autoscaling would blow round-off up into a
+                # signal, so show half a turn around it
+                middle = float(np.mean(kept))
+                twin.set_ylim(middle - 0.5, middle + 0.5)
             ax.legend(handles=lines, frameon=False)
         if title:
             ax.set_title(title)
@@ -517,6 +625,42 @@ def _draw_rod(ax, positions, width, collection=None):
     return collection
 
 
+PARAM_NAMES = {"extension": "L/L0", "twist_density": "Φa", "force_multiple": "F/F_C",
+               "twist_density_current": "Φa (stretched rod)"}
+
+
+def params_text(params: dict) -> str:
+    """A run's sampled parameters in the paper's symbols: "L/L0 1.12, Φa 0.8"."""
+    return ", ".join(f"{PARAM_NAMES.get(k, k)} {v:.3g}" if isinstance(v, float)
+                     else f"{PARAM_NAMES.get(k, k)} {v}" for k, v in params.items())
+
+
+def run_label(row) -> str:
+    """A shape panel's label: the run's parameters, then its phase (or status)."""
+    params = {k: row[k] for k in PARAM_NAMES if k in row and row[k] == row[k]}
+    phase = row.get("phase") if isinstance(row.get("phase"), str) else row.get("status", "")
+    return f"{params_text(params) or row.name}\n{phase}"
+
+
+def shape_panels(table, most: int = 12) -> list[str]:
+    """Up to `most` runs for a shape grid chosen by parameter, not by id: with a
+    classification, as many of each phase as fit, each phase's spread over its twist
+    densities; else evenly over the runs in order of twist."""
+    twist = next((c for c in ("twist_density", "twist_density_current", "force_multiple")
+                  if c in table), None)
+    ordered = table.sort_values(twist) if twist else table
+    if "phase" not in ordered:
+        picks = np.unique(np.linspace(0, len(ordered) - 1, min(most, len(ordered))).astype(int))
+        return list(ordered["run_id"].iloc[picks])
+    groups = [g for _, g in ordered.groupby(ordered["phase"].fillna("failed"), sort=False)]
+    share = max(1, most // max(len(groups), 1))
+    chosen = []
+    for group in groups:
+        picks = np.unique(np.linspace(0, len(group) - 1, min(share, len(group))).astype(int))
+        chosen += list(group["run_id"].iloc[picks])
+    return chosen[:most]
+
+
 def shape_grid(results: list[tuple[str, np.ndarray, float]], path=None, *, ncols: int = 6,
                axes=None) -> Figure:
     """Final rod shapes, one small 3D view each, drawn as tubes of the given radius.
@@ -539,19 +683,33 @@ def shape_grid(results: list[tuple[str, np.ndarray, float]], path=None, *, ncols
     ncols = min(ncols, len(results))
     nrows = -(-len(results) // ncols)
     zoom, cell_w = _fit_view(half)
-    cell_h = VIEW_HEIGHT + TITLE_HEIGHT
+    lines = max(str(label).count("\n") + 1 for label, _, _ in results)
+    cell_h = VIEW_HEIGHT + TITLE_HEIGHT * lines
+    key_h = 0.45  # inches for the colour key under the views
+    width = max(cell_w * ncols, 2.4)
 
     with matplotlib.rc_context(STYLE):
-        fig = Figure(figsize=(cell_w * ncols, cell_h * nrows))
+        fig = Figure(figsize=(width, cell_h * nrows + key_h))
         FigureCanvasAgg(fig)
+        height = cell_h * nrows + key_h
         views = []
         for i, ((label, _, radius), shape) in enumerate(zip(results, shapes)):
             row, col = divmod(i, ncols)
-            centre_x, bottom = (col + 0.5) * cell_w, (nrows - 1 - row) * cell_h
+            centre_x = (col + 0.5) * cell_w + 0.5 * (width - cell_w * ncols)
+            bottom = key_h + (nrows - 1 - row) * cell_h
             ax = _rod_axes(fig, centre_x, bottom, _box(shape)[0], half, zoom)
-            fig.text(centre_x / (cell_w * ncols), (bottom + VIEW_HEIGHT) / (cell_h * nrows),
-                     label, ha="center", va="bottom", fontsize=9)
+            fig.text(centre_x / width, (bottom + VIEW_HEIGHT) / height, label, ha="center",
+                     va="bottom", fontsize=8 if lines > 1 else 9)
             views.append((ax, shape, radius))
+        # the colour along each rod is its arc length: a key, so a strand can be followed
+        key = fig.add_axes([0.5 - 0.6 / width, 0.2 * key_h / height, 1.2 / width,
+                            0.2 * key_h / height])
+        fig.colorbar(ScalarMappable(Normalize(0, 1), matplotlib.colormaps["viridis"]),
+                     cax=key, orientation="horizontal", ticks=[])
+        key.text(-0.04, 0.5, "start", transform=key.transAxes, ha="right", va="center",
+                 fontsize=7)
+        key.text(1.04, 0.5, "end", transform=key.transAxes, ha="left", va="center", fontsize=7)
+        key.set_title("colour: arc length", fontsize=7, pad=2)
         fig.canvas.draw()  # final axes sizes, for the line widths
         for ax, shape, radius in views:
             _draw_rod(ax, shape, _line_width(fig, ax, radius))
@@ -577,12 +735,15 @@ def _shapes_into(results, shapes, half, axes, path) -> Figure:
 
 
 def movie(snapshot_positions: np.ndarray, radius: float, path, fps: int = 10, *,
-          times: np.ndarray | None = None, max_frames: int = 200) -> Path:
+          times: np.ndarray | None = None, twist_density: np.ndarray | None = None,
+          max_frames: int = 200, height: float | None = None) -> Path:
     """Animate a rod (S, n+1, 3) with fixed axes over all frames.
 
     Writes MP4 if ffmpeg is on PATH and `path` does not end in .gif, else a GIF (Pillow) next
     to `path` with the suffix .gif. Returns the path written. At most `max_frames` evenly
-    spaced frames are kept (GIFs grow with every frame). `times` (s) labels the frames.
+    spaced frames are kept (GIFs grow with every frame). `times` (s) and `twist_density`
+    (the paper's Φa of each frame) label the frames; `height` (inches at 150 dpi) scales the
+    picture.
     """
     frames = np.asarray(snapshot_positions, float)
     if frames.ndim != 3 or frames.shape[0] == 0:
@@ -601,7 +762,7 @@ def movie(snapshot_positions: np.ndarray, radius: float, path, fps: int = 10, *,
 
     with matplotlib.rc_context(STYLE):
         zoom, width = _fit_view(half)
-        width = max(width, 1.6)  # room for the time label
+        width = max(width, 2.4 if twist_density is not None else 1.6)  # room for the label
         fig = Figure(figsize=(width, VIEW_HEIGHT + TITLE_HEIGHT))
         FigureCanvasAgg(fig)
         ax = _rod_axes(fig, width / 2, 0.0, centre, half, zoom)
@@ -611,12 +772,16 @@ def movie(snapshot_positions: np.ndarray, radius: float, path, fps: int = 10, *,
 
         def update(i):
             _draw_rod(ax, frames[i], None, collection)
-            label.set_text(f"t = {times[keep[i]]:.3g} s" if times is not None
-                           else f"frame {keep[i]}")
+            text = f"t = {times[keep[i]]:.3g} s" if times is not None else f"frame {keep[i]}"
+            if twist_density is not None:
+                text += f", Φa = {twist_density[keep[i]]:.3g}"
+            label.set_text(text)
             return collection, label
 
         anim = animation.FuncAnimation(fig, update, frames=len(frames), blit=False)
         writer = (animation.FFMpegWriter(fps=fps) if use_mp4
                   else animation.PillowWriter(fps=fps))
-        anim.save(path, writer=writer, dpi=150)
+        # the layout is in inches; a size asked for scales the pixels
+        scale = 1.0 if height is None else height / (VIEW_HEIGHT + TITLE_HEIGHT)
+        anim.save(path, writer=writer, dpi=150 * scale)
     return path

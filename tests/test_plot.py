@@ -282,3 +282,78 @@ def test_figure_in_a_subfigure_returns_the_top_figure(no_files):
     fig = Figure(figsize=(8, 3))
     ax = fig.subfigures(1, 2)[1].add_subplot()
     assert plot.topology_curves(fake_result(), ax=ax) is fig
+
+
+def test_a_failed_run_is_drawn_where_it_was_sampled_in_either_twist_reading(no_files):
+    # an `error` run has no classified Φa; it must still appear (a black cross) at the Φa
+    # and L/L0 it was sampled at, also in the stretched-rod reading (it was dropped there)
+    table = sweep_table().assign(phi_a_current=lambda t: t.twist_density / t.extension**1.5)
+    table.loc[4, ["status", "phi_a_current"]] = ["error", np.nan]
+    for twist, expected in (("twist_density", 0.7), ("phi_a_current", 0.7 / 1.1**1.5)):
+        fig = plot.phase_map(table, twist=twist)
+        crosses = [c for c in fig.axes[0].collections
+                   if c.get_offsets().shape[0] == 1 and c.get_facecolor().size
+                   and np.allclose(c.get_offsets()[0], [1.1, expected])]
+        assert crosses, twist
+        legend = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert "failed (1)" in legend and "not converged (1)" in legend
+
+
+def test_phase_map_caption_and_journal_sizes(no_files):
+    config = {"scene": {"scene": "twist_under_load", "rod": {"elements": 64, "length": 1.0,
+                                                             "radius": 0.025},
+                        "material": {"youngs_modulus": 1e6, "incompressible": True},
+                        "loading": {"twist_rate": 1.0, "force_multiple": None},
+                        "solver": {"hold_max_time": 8.0, "hold_tolerance": 1e-3,
+                                   "damping": 20.0}},
+              "sweep": {"axes": {"twist_density": [0, 2.4], "extension": [1, 1.3]},
+                        "sampler": "random", "samples": 6, "seed": 1}}
+    caption = plot.sweep_caption(config, sweep_table())
+    assert "64 elements" in caption and "6 random samples" in caption
+    assert "4 ok" in caption and "1 unstable" in caption and "F_C" not in caption
+    fig = plot.phase_map(sweep_table(), caption=caption, size="column")
+    assert tuple(fig.get_size_inches()) == plot.SIZES["column"]
+    assert "64 elements" in fig._supxlabel.get_text()
+    with pytest.raises(ValueError, match="column"):
+        plot.phase_map(sweep_table(), size="poster")
+
+
+def test_stages_are_shaded_and_a_flat_writhe_is_not_magnified(no_files):
+    result = fake_result(rows=12)  # stages 0 and 1 both turn the end: two bands
+    result.diagnostics["stages"] = [{"label": "twist 0"}, {"label": "twist 1"}]
+    fig = plot.topology_curves(result)
+    texts = {t.get_text() for t in fig.axes[0].texts}
+    assert {"twist 0", "twist 1"} <= texts and len(fig.axes[0].patches) == 1
+    history = dict(fake_result().history, writhe=np.full(12, 1e-13) * np.arange(12))
+    twin = plot.force_displacement(history).axes[1]
+    assert twin.get_ylim()[1] - twin.get_ylim()[0] == pytest.approx(1.0)
+
+
+def test_vtk_export_holds_the_rod_its_radius_and_arc_length(tmp_path):
+    from rodphase.export import node_radii, write_vtk, write_vtk_series
+
+    positions, radii = helix(n=10), np.linspace(0.02, 0.03, 10)
+    text = write_vtk(tmp_path / "rod.vtk", positions, radii).read_text().splitlines()
+    start = text.index("POINTS 11 double") + 1
+    np.testing.assert_allclose(np.loadtxt(text[start:start + 11]), positions, rtol=1e-9)
+    assert text[text.index("LINES 1 12") + 1] == "11 " + " ".join(map(str, range(11)))
+    start = text.index("SCALARS radius double 1") + 2
+    np.testing.assert_allclose(np.array(text[start:start + 11], float), node_radii(radii))
+    assert node_radii(radii)[0] == 0.02 and node_radii(radii)[-1] == 0.03
+    start = text.index("SCALARS arc_length double 1") + 2
+    arc = np.array(text[start:start + 11], float)
+    assert arc[0] == 0.0 and arc[-1] == 1.0 and np.all(np.diff(arc) > 0)
+    files = write_vtk_series(tmp_path / "frames" / "rod", np.stack([positions] * 3), radii)
+    assert [f.name for f in files] == ["rod_0000.vtk", "rod_0001.vtk", "rod_0002.vtk"]
+    with pytest.raises(ValueError, match="element radii"):
+        write_vtk(tmp_path / "bad.vtk", positions, radii[:5])
+
+
+def test_movie_frames_say_time_and_twist_density(tmp_path):
+    frames = np.stack([helix(turns=t) for t in range(3)])
+    out = plot.movie(frames, 0.025, tmp_path / "rod.gif", fps=5, times=np.arange(3) * 0.5,
+                     twist_density=np.array([0.0, 0.4, 0.8]), height=1.5)
+    from PIL import Image
+
+    with Image.open(out) as gif:
+        assert gif.n_frames == 3 and gif.size[1] == pytest.approx(1.5 * 150, abs=2)

@@ -85,6 +85,14 @@ def test_sweep_classify_plot_end_to_end(tmp_path):
     result = cli("plot", out, "--kind", "phase", "-o", tmp_path / "phase.png")
     assert result.exit_code == 0, result.output
     assert (tmp_path / "phase.png").stat().st_size > 10_000
+    for args in (["--kind", "phase", "--size", "column", "--twist", "current"],
+                 ["--kind", "phase", "--size", "3,2.5", "--no-caption"], ["--kind", "shape"]):
+        result = cli("plot", out, *args, "-o", tmp_path / "more.png")
+        assert result.exit_code == 0, (args, result.output)
+    result = cli("plot", out, "--kind", "phase", "--size", "big", "-o", tmp_path / "x.png")
+    assert result.exit_code == 2 and "error: --size" in result.output
+    result = cli("export", out, "--run", table["run_id"][0], "-o", tmp_path / "rod.vtk")
+    assert result.exit_code == 0 and (tmp_path / "rod.vtk").read_text().startswith("# vtk")
     # the file is readable without rodphase
     with h5py.File(out, "r") as f:
         assert "config_yaml" in f.attrs and "config_hash" in f.attrs
