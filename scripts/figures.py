@@ -350,7 +350,8 @@ def figure4b(results: dict, out: Path, sets: list) -> dict:
             ax.axvspan(s["from"], s["to"], color=P.GREEN, alpha=0.10 + 0.08 * (j % 2), lw=0)
             ax.axvline(s["at"], color=P.GREEN, lw=0.8, ls=":")
     ax1.set_title(f"{m['load_F_C']:.0f} $F_C$, $\\Phi a$ = {m['phi_a']:g}: E ramped "
-                  f"×{m['factor']:g} in {cfg.stiffen.time:g} s (shaded: writhe bursts, dotted: their peaks)", fontsize=10)
+                  f"×{m['factor']:g} in {cfg.stiffen.time:g} s\n(shaded: writhe bursts, dotted: "
+                  "their peaks)", fontsize=9)
     save(fig, out / "fig4b.png")
 
     picks = [rows[int(np.argmin(np.abs(x - v)))] for v in np.linspace(1.0, x.max(), 5)]

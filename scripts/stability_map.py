@@ -327,7 +327,9 @@ def plot(data: dict, path: Path) -> None:
     ax.set_xlabel("elements n")
     ax.set_ylabel("dt [s]")
     ax.set_title("Largest stable dt, straight rod, contact off", fontsize=10)
-    ax.legend(fontsize=7, loc="upper right")
+    # below the axes: inside, every corner of this plot holds data
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncols=2,
+              frameon=False)
     ax = axes[1]
     for c in data["cases"]:
         marker = {"straight": {"none": "o", "default": "x", "linear": "+"}[c["damping"]], "hairpin": "s",
