@@ -55,7 +55,7 @@ LONG_SAMPLES = 300   # sweeps that must still be running while something else ha
 DISK_SAMPLES = 32    # ~1.9 MB with DISK_EXTRA: more than the 1 MiB tmpfs holds
 DISK_EXTRA = {"output.history_interval": 0.02}
 MEMORY_SAMPLES = 300
-MEMORY_EXTRA = {"output.history_interval": 0.02}
+MEMORY_EXTRA = {"output.history_interval": 0.002}  # ~0.5 MB a run: the writer lags
 MEMORY_LIMIT_MB = 60.0
 TRACED = "pwrite64,write,rename,renameat,renameat2,fsync,fdatasync"
 SIGNAL_DEADLINE = 15.0   # s for the parent to exit after SIGINT/SIGTERM; then workers dead
@@ -452,7 +452,9 @@ def inspect_main(path: str) -> None:
     runs = {}
     for _, row in table.iterrows():
         rid = str(row["run_id"])
-        runs[rid] = {"status": value(row, "status"), "message": str(value(row, "message"))[:300],
+        message = str(value(row, "message"))
+        runs[rid] = {"status": value(row, "status"), "message": message[:300],
+                     "names_worker": "worker" in message.lower(),
                      "wall_time": value(row, "wall_time"),
                      "twist_density": value(row, "twist_density"),
                      "extension": value(row, "extension"),
@@ -486,7 +488,8 @@ def inspect_main(path: str) -> None:
 # ---------------------------------------------------------------- shared judgements
 
 def store_problems(info: dict, *, seen: set[str] = frozenset(), expect_rows: int | None = None,
-                   reference: dict | None = None, all_ok: bool = False) -> list[str]:
+                   reference: dict | None = None, all_ok: bool = False,
+                   same_config: bool = False) -> list[str]:
     """What is wrong with an inspected store: does not open, finished runs lost, a run that
     does not read back, a run whose final positions differ from the reference sample with
     the same parameters."""
@@ -514,23 +517,37 @@ def store_problems(info: dict, *, seen: set[str] = frozenset(), expect_rows: int
         if bad:
             problems.append(f"runs not ok: {dict(list(bad.items())[:5])}")
     if reference is not None:
-        mismatch = compare(reference, info)
+        mismatch, compared = compare(reference, info)
         if mismatch:
             problems.append(f"{len(mismatch)} run(s) differ from the reference: "
                             f"{', '.join(mismatch[:5])}")
+        if same_config and compared != len(runs):
+            problems.append(f"only {compared} of {len(runs)} runs match a reference run "
+                            "by id and parameters")
     return problems
 
 
-def compare(reference: dict, info: dict) -> list[str]:
-    """Run ids whose parameters equal a reference run's but whose final positions do not."""
-    by_params = {(v["twist_density"], v["extension"]): v["pos_hash"]
-                 for v in reference["runs"].values()}
-    out = []
+def compare(reference: dict, info: dict) -> tuple[list[str], int]:
+    """(run ids whose final positions differ from the reference sample, how many runs were
+    compared). A run is compared with the reference run of the same id when both list the
+    same parameters (or neither lists any), else with the reference run of its parameters."""
+    ref_runs = reference["runs"]
+    by_params = {(v["twist_density"], v["extension"]): v["pos_hash"] for v in ref_runs.values()
+                 if v["twist_density"] is not None and v["extension"] is not None}
+    mismatch, compared = [], 0
     for rid, v in info["runs"].items():
         key = (v["twist_density"], v["extension"])
-        if key in by_params and v["pos_hash"] is not None and v["pos_hash"] != by_params[key]:
-            out.append(rid)
-    return out
+        if rid in ref_runs and key == (ref_runs[rid]["twist_density"],
+                                       ref_runs[rid]["extension"]):
+            want = ref_runs[rid]["pos_hash"]
+        elif key in by_params:
+            want = by_params[key]
+        else:
+            continue
+        compared += 1
+        if v["pos_hash"] is not None and v["pos_hash"] != want:
+            mismatch.append(rid)
+    return mismatch, compared
 
 
 def output_problems(res: Result, *, rc: int | tuple | None = None, error_names=(),
@@ -612,7 +629,7 @@ def case_kill(lab: Lab, kills: int = 8, chain: int = 3) -> list[Outcome]:
             if not landed:
                 label += f" (not reached: the command exited {rc})"
             info = lab.inspect(out)
-            problems = store_problems(info, seen=seen, reference=ref)
+            problems = store_problems(info, seen=seen, reference=ref, same_config=True)
             if not landed and rc not in (0, 1):
                 last = (res.text.strip().splitlines() or ["?"])[-1]
                 problems.append(f"exit {rc} without being killed: {last[:200]}")
@@ -624,7 +641,7 @@ def case_kill(lab: Lab, kills: int = 8, chain: int = 3) -> list[Outcome]:
         problems = output_problems(res, rc=0, one_error=False)
         info = lab.inspect(out)
         problems += store_problems(info, seen=seen, expect_rows=SAMPLES, reference=ref,
-                                   all_ok=True)
+                                   all_ok=True, same_config=True)
         per_chain.add(problems, f"chain {chain_no} ({'; '.join(kill_labels)})")
     for o in (per_kill, per_chain, orphans):
         o.seconds = time.monotonic() - start
@@ -808,8 +825,7 @@ def case_worker_dies(lab: Lab, repeats: int = 1) -> list[Outcome]:
             info = lab.inspect(out)
             problems += store_problems(info, expect_rows=LONG_SAMPLES, reference=ref)
             for rid, v in info["runs"].items():
-                if v["status"] != "ok" and not (v["status"] == "error"
-                                                and "worker" in (v["message"] or "").lower()):
+                if v["status"] != "ok" and not (v["status"] == "error" and v["names_worker"]):
                     problems.append(f"{rid}: {v['status']}: {(v['message'] or '')[:120]!r} "
                                     "(neither retried nor an error naming the worker)")
         else:
@@ -1025,10 +1041,14 @@ def case_force_same_config(lab: Lab) -> list[Outcome]:
     problems = output_problems(res, rc=0, one_error=False)
     after = lab.inspect(out)
     problems += store_problems(after, seen=set(before["runs"]), expect_rows=SAMPLES,
-                               reference=ref)
+                               reference=ref, same_config=True)
     redone = [rid for rid, v in after["runs"].items() if rid in before["runs"] and (
         v["diag_wall"] != before["runs"][rid]["diag_wall"]
         or v["wall_time"] != before["runs"][rid]["wall_time"])]
+    if before["runs"] and all(v["diag_wall"] is None and v["wall_time"] is None
+                              for v in before["runs"].values()):
+        problems.append("inconclusive: the runs carry no wall time (diagnostics or table) to "
+                        "tell a kept run from one simulated again")
     if redone:
         problems.append(f"{len(redone)} of {len(before['runs'])} finished runs were deleted "
                         "and simulated again (their wall times changed)")

@@ -14,7 +14,8 @@ input that must stop before anything is simulated; stores crafted by someone els
 
 Needs Linux (/proc), strace (the kill row) and root for mount (the disk-full row); a row
 that cannot run here is skipped with the reason. About 3-4 minutes on 2 cores.
-RODPHASE_ROBUSTNESS_KILLS sets the number of kill points (default 6).
+RODPHASE_ROBUSTNESS_KILLS sets the number of kill points (default 6);
+RODPHASE_ROBUSTNESS_MEMORY=1 adds the 300-run memory row (~25 s).
 """
 
 import importlib.util
@@ -32,8 +33,10 @@ _spec.loader.exec_module(rb)
 
 KILLS = int(os.environ.get("RODPHASE_ROBUSTNESS_KILLS", "6"))
 CASES = rb.cases(kills=KILLS)
-# the 300-run memory case takes minutes and a smaller sweep cannot show the growth: script only
-ROWS = [case for case in CASES if not case.startswith("memory-")]
+ROWS = list(CASES)
+# The memory row needs the full 300 runs (~110 MB written, ~25 s): a smaller sweep stays
+# under the 60 MB bound even when every result is held. Opt in with RODPHASE_ROBUSTNESS_MEMORY=1.
+MEMORY = os.environ.get("RODPHASE_ROBUSTNESS_MEMORY") == "1"
 # informative rows, reported but judged by another row (parent-sigkill-no-orphans)
 INFORMATIVE = ("kill-9: no worker",)
 
@@ -50,6 +53,9 @@ def lab(tmp_path_factory):
 
 @pytest.mark.parametrize("case", ROWS, ids=ROWS)
 def test_robustness(lab, case):
+    if case.startswith("memory-") and not MEMORY:
+        pytest.skip("the 300-run memory case is opt-in (RODPHASE_ROBUSTNESS_MEMORY=1); "
+                    "scripts/robustness.py runs it by default")
     try:
         rows = CASES[case](lab)
     except rb.Skip as why:
