@@ -74,7 +74,7 @@ def run(scene, overrides=None, **settings):
     goes unstable or does not settle comes back with that status; it does not raise."""
     from .sweep import run_scene
 
-    return run_scene(load(scene, overrides, **settings).plain())
+    return run_scene(load(scene, overrides, **settings))
 
 
 def run_sweep(sweep, output, overrides=None, *, jobs: int = 2, backend: str = "loky",

@@ -100,7 +100,7 @@ def run(scene, output, sets, force):
         click.echo("Compiling the kernel (once; numba caches it on disk) ...")
         click.echo(f"  ready in {compile_kernel():.1f} s")  # kept out of the run's own timing
         click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
-        result = run_scene(cfg.plain())
+        result = run_scene(cfg)
         store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
         table = classify_store(store)
     d = result.diagnostics

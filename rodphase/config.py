@@ -44,6 +44,11 @@ class Frozen(dict):
     __setitem__ = __delitem__ = update = pop = popitem = setdefault = clear = _blocked  # type: ignore
     __setattr__ = __delattr__ = _blocked  # cfg.rod.elements = 40 would be silently ignored
 
+    def __reduce__(self):
+        # pickled (to sweep workers) as a dict handed to the constructor: the default
+        # protocol would rebuild it key by key through the blocked __setitem__
+        return (type(self), (dict(self),))
+
     def plain(self) -> dict:
         def convert(v):
             if isinstance(v, Frozen):
@@ -145,19 +150,45 @@ def interval(minimum: float, maximum: float, unit: str) -> Check:
 REQUIRED = object()
 positive = number(0.0, strict_min=True)
 
+class EngineDefault:
+    """A schema default that is the engine's own: the default of a field of one of the
+    dataclasses of rodphase.rod.model (Rod, Contact, Solver), so that a config and a Problem
+    built in Python without that key mean the same thing. None there is "auto" here.
+    Resolved when a scene is validated (importing the engine loads numba)."""
+
+    def __init__(self, cls: str, field: str):
+        self.cls, self.field = cls, field
+
+    def value(self):
+        import dataclasses
+
+        from .rod import model
+
+        default = {f.name: f.default for f in dataclasses.fields(getattr(model, self.cls))}[
+            self.field]
+        return "auto" if default is None else default
+
+    def __repr__(self) -> str:
+        return f"{self.cls}.{self.field}"
+
+
+def _engine(cls: str, field: str) -> EngineDefault:
+    return EngineDefault(cls, field)
+
+
 SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "rod": {
         "length": (number(0, strict_min=True, unit="m"), 1.0),
         "radius": (number(0, strict_min=True, unit="m"), 0.025),
         "elements": (number(4, 5000, integer=True), 100),
-        "density": (number(0, strict_min=True, unit="kg/m^3"), 1000.0),
+        "density": (number(0, strict_min=True, unit="kg/m^3"), _engine("Rod", "density")),
         "imperfection": (number(0, 1, unit="rest curvature x L0 (RMS, random)"), 1e-3),
         "seed": (number(0, integer=True), 0),
     },
     "material": {
-        "youngs_modulus": (number(0, strict_min=True, unit="Pa"), 1.0e6),
+        "youngs_modulus": (number(0, strict_min=True, unit="Pa"), _engine("Rod", "youngs_modulus")),
         "shear_modulus": (auto_or(number(0, strict_min=True, unit="Pa")), "auto"),
-        "incompressible": (boolean, True),
+        "incompressible": (boolean, _engine("Rod", "incompressible")),
         # given directly instead of from E, G and the radius (null: derived), for rods that
         # are not solid isotropic cylinders; the radius then sets only mass, inertia, contact
         "bend_stiffness": (number(0, strict_min=True, unit="N m^2 (B = EI)", nullable=True), None),
@@ -191,37 +222,42 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     },
     "physics": {
         "self_contact": (boolean, True),
-        "friction": (number(0, 5), 0.0),
+        "friction": (number(0, 5), _engine("Contact", "friction")),
         "gravity": (vector3, (0.0, 0.0, 0.0)),
     },
     "contact": {
-        "stiffness": (number(0, strict_min=True, unit="E per unit overlap per unit length"), 10.0),
-        "damping_ratio": (number(0, 10), 0.5),
-        "exclusion": (number(0, strict_min=True, unit="rest radii of arc length"), math.pi),
-        "skin": (number(0, strict_min=True, unit="rest radii"), 0.5),
-        "near_skin": (number(0, strict_min=True, unit="rest radii"), 0.01),
-        "penetration_limit": (number(0, 2, strict_min=True, unit="overlap / radius"), 0.5),
+        "stiffness": (number(0, strict_min=True, unit="E per unit overlap per unit length"),
+                      _engine("Contact", "stiffness")),
+        "damping_ratio": (number(0, 10), _engine("Contact", "damping_ratio")),
+        "exclusion": (number(0, strict_min=True, unit="rest radii of arc length"),
+                      _engine("Contact", "exclusion")),
+        "skin": (number(0, strict_min=True, unit="rest radii"), _engine("Contact", "skin")),
+        "near_skin": (number(0, strict_min=True, unit="rest radii"), _engine("Contact", "near_skin")),
+        "penetration_limit": (number(0, 2, strict_min=True, unit="overlap / radius"),
+                              _engine("Contact", "penetration_limit")),
     },
     "solver": {
-        "dt": (auto_or(number(0, strict_min=True, unit="s")), "auto"),
-        "safety": (number(0, 1, strict_min=True), 0.5),
-        "damping": (number(0, unit="1/s"), 20.0),
-        "rotational_damping": (auto_or(number(0, unit="1/s")), "auto"),
-        "quadratic_drag": (number(0, unit="1/m: extra drag rate per unit speed"), 1000.0),
+        "dt": (auto_or(number(0, strict_min=True, unit="s")), _engine("Solver", "dt")),
+        "safety": (number(0, 1, strict_min=True), _engine("Solver", "safety")),
+        "damping": (number(0, unit="1/s"), _engine("Solver", "damping")),
+        "rotational_damping": (auto_or(number(0, unit="1/s")), _engine("Solver", "rotational_damping")),
+        "quadratic_drag": (number(0, unit="1/m: extra drag rate per unit speed"),
+                           _engine("Solver", "quadratic_drag")),
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
-        "hold_tolerance": (number(0, 1, strict_min=True), 1e-3),
+        "hold_tolerance": (number(0, 1, strict_min=True), _engine("Solver", "tolerance")),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
         # a hold also ends once the window-mean shape moves < hold_tolerance × L0 per window
-        "settle_window": (number(0, unit="s; 0 = residual test only"), 0.5),
+        "settle_window": (number(0, unit="s; 0 = residual test only"),
+                          _engine("Solver", "settle_window")),
         "max_steps": (number(1, integer=True, nullable=True), None),
         # a run stopped as under-resolved is run again with twice the elements, up to this
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
         # a hold ends only at an equilibrium that survives a perturbation of this size
-        "stability_probe": (boolean, False),
-        "probe_size": (number(0, 1, strict_min=True, unit="rest radii"), 0.1),
+        "stability_probe": (boolean, _engine("Solver", "stability_probe")),
+        "probe_size": (number(0, 1, strict_min=True, unit="rest radii"), _engine("Solver", "probe_size")),
     },
     "output": {
-        "history_interval": (number(0, strict_min=True, unit="s"), 0.1),
+        "history_interval": (number(0, strict_min=True, unit="s"), _engine("Solver", "history_interval")),
         "topology": (boolean, True),
     },
     # scene-specific sections: read only by the scenes that use them
@@ -307,7 +343,10 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
                 raise _unknown(f"{section}.", key, fields)
         for key, (check, default) in fields.items():
             path = f"{section}.{key}"
-            values[key] = check(path, given[key]) if key in given else default
+            if key in given:
+                values[key] = check(path, given[key])
+            else:
+                values[key] = default.value() if isinstance(default, EngineDefault) else default
         out[section] = Frozen(values)
     _check_scene_consistency(out)
     return Frozen(out)

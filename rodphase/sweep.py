@@ -85,7 +85,7 @@ class Job:
 
     run_ids: list[str]
     params: list[dict]
-    scene: dict  # plain, validated scene
+    scene: C.Frozen  # the validated scene: workers use it as it is, without validating again
     twist_targets: list[float] | None = None  # turns, ascending, one per run id
     # a scene builder registered at run time (not one of rodphase's): the workers are other
     # processes that never saw the registration, so the job carries it
@@ -105,14 +105,15 @@ def single_threaded_numba():
         numba.set_num_threads(previous)
 
 
-def run_scene(scene_plain: dict, *, topology: bool | None = None,
+def run_scene(scene, *, topology: bool | None = None,
               twist_targets: list[float] | None = None) -> RunResult:
-    """Build and simulate one scene (a plain validated dict). Never raises for a failed run:
-    a run that goes unstable comes back with that status."""
+    """Build and simulate one scene: a validated config (used as it is) or a plain mapping
+    (validated first). Never raises for a failed run: a run that goes unstable comes back
+    with that status."""
     from .rod import simulate
     from .scenes import SCENES, build
 
-    cfg = C.validate_scene(scene_plain, SCENES)
+    cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
     extra = {} if twist_targets is None else {"twist_targets": twist_targets}
     want_topology = cfg.output.topology if topology is None else topology
 
@@ -218,7 +219,7 @@ def plan(sweep, scene) -> list[Job]:
                                 exc.allowed) from None
         checked.append((f"run-{index:05d}", dict(point), cfg))
     if sweep.sampler != "continuation":
-        return [Job([rid], [p], cfg.plain(), builder=builder) for rid, p, cfg in checked]
+        return [Job([rid], [p], cfg, builder=builder) for rid, p, cfg in checked]
     twist_axis = next((a for a in ("twist_density", "twist_density_current") if a in sweep.axes),
                       None)
     if twist_axis is None:
@@ -230,7 +231,7 @@ def plan(sweep, scene) -> list[Job]:
     jobs = []
     for members in groups.values():
         members.sort(key=lambda m: m[1][twist_axis])
-        jobs.append(Job([m[0] for m in members], [m[1] for m in members], members[0][2].plain(),
+        jobs.append(Job([m[0] for m in members], [m[1] for m in members], members[0][2],
                         twist_targets=[C.twist_turns(m[2]) for m in members], builder=builder))
     return jobs
 
@@ -603,7 +604,7 @@ def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
         for index, u in enumerate(unit):
             point = {k: float(v) for k, v in zip(names, lo + np.asarray(u) * span)}
             cfg = scene_for(scene, point)
-            jobs.append(Job([f"run-{index:05d}"], [point], cfg.plain(), builder=builder))
+            jobs.append(Job([f"run-{index:05d}"], [point], cfg, builder=builder))
         yield jobs
         for job in jobs:
             rid = job.run_ids[0]

@@ -300,3 +300,80 @@ def test_config_prints_the_resolved_scene_and_sweep_and_shipped_sweeps_go_by_nam
         assert sweep.samples == 24
     with pytest.raises(C.ConfigError, match="shipped sweep: .*quick"):
         C.load_sweep(str(tmp_path / "missing.yaml"), [], SCENES)
+
+
+def test_one_set_of_defaults_the_engines():
+    """A key left out of a config means what the engine's own dataclass says (the schema
+    said quadratic_drag 1000, tolerance 1e-3, history 0.1 s, settle 0.5 s where the engine
+    said 0, 1e-4, 0.05 s, 0): a Problem from a bare config equals one built in Python."""
+    import dataclasses
+
+    from rodphase.rod import Contact, Rod, Solver
+
+    bare = C.validate_scene({"scene": "twist_under_load"}, SCENES)
+    problem = build(bare)
+    engine = {"Solver": Solver(), "Contact": Contact()}
+    for section, fields in C.SCENE_SCHEMA.items():
+        for key, (_, default) in fields.items():
+            if isinstance(default, C.EngineDefault):
+                expected = {f.name: f.default for f in dataclasses.fields(
+                    {"Rod": Rod, "Solver": Solver, "Contact": Contact}[default.cls])}[default.field]
+                assert bare[section][key] == ("auto" if expected is None else expected), key
+    for name in ("quadratic_drag", "tolerance", "history_interval", "settle_window", "safety",
+                 "damping", "stability_probe", "probe_size"):
+        assert getattr(problem.solver, name) == getattr(engine["Solver"], name), name
+    for name in ("stiffness", "damping_ratio", "exclusion", "skin", "near_skin",
+                 "penetration_limit", "friction"):
+        assert getattr(problem.contact, name) == getattr(engine["Contact"], name), name
+
+
+class _Tracked(C.Frozen):
+    """A config that notes every key read from it."""
+
+    read: set = set()
+
+    def __getitem__(self, key):
+        _Tracked.read.add((self._where, key))
+        return dict.__getitem__(self, key)
+
+    def get(self, key, default=None):
+        _Tracked.read.add((self._where, key))
+        return dict.get(self, key, default)
+
+
+def _tracked(value, where=""):
+    if not isinstance(value, dict):
+        return value
+    out = _Tracked({k: _tracked(v, f"{where}.{k}" if where else k) for k, v in value.items()})
+    object.__setattr__(out, "_where", where)
+    return out
+
+
+def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
+    """A key that nothing reads is a setting that silently does nothing."""
+    import rodphase.rod
+    from rodphase import sweep
+    from rodphase.result import RunResult
+
+    _Tracked.read = set()
+    monkeypatch.setattr(C, "validate_scene",
+                        lambda raw, registered=None: _tracked(_VALIDATE(raw, registered)))
+    # a run that reports itself under-resolved, so that the runner reads its refinement cap
+    monkeypatch.setattr(rodphase.rod, "simulate", lambda problem, **kw: RunResult(
+        "unstable", "", None, None, None, None, {}, None, None,
+        {"guard": "resolution", "wall_time": 0.0}))
+    # the other ways to give the load and the twist, read only when they are set
+    others = [(f"loading.{k}", None) for k in ("force_multiple", "force", "extension",
+                                                "twist_turns", "twist_density",
+                                                "twist_density_current")]
+    variants = [[], others + [("loading.extension", 1.1), ("loading.twist_density_current", 0.5)],
+                others + [("loading.force", 10.0), ("loading.twist_turns", 2.0)]]
+    for path in sorted((C.PACKAGE_CONFIGS / "scenes").glob("*.yaml")):
+        for overrides in variants:
+            raw = C.apply_overrides(C.read_yaml(path), overrides)
+            sweep.run_scene(raw)
+    every = {(section, key) for section, fields in C.SCENE_SCHEMA.items() for key in fields}
+    assert every - _Tracked.read == set()
+
+
+_VALIDATE = C.validate_scene
