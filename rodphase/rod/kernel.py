@@ -19,6 +19,13 @@ scalar settings are packed in `ints` and `floats` (I_* and F_* indices). The int
 position Verlet with the two half drifts merged, so positions live at half steps inside the
 loop; damping multiplies velocities by exp(-ν·dt), which is stable for any ν ≥ 0, and is
 applied before the boundary conditions so that prescribed motions are exact.
+
+Every function advance calls is inlined into it (inline="always", at numba's IR level), so
+that its machine code exists once. A callee compiled on its own is linked into advance as a
+linkonce_odr copy that LLVM optimises again with advance; a process that compiles advance
+then binds the call to the callee's own copy, one that loads advance from numba's disk cache
+to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m on the
+reference scenes, tests/test_kernel_cache.py).
 """
 
 import numpy as np
@@ -160,7 +167,7 @@ def table_slope(times, values, count, t):
     return (values[lo + 1] - values[lo]) / (times[lo + 1] - times[lo])
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def rotate_frames(Q, w, scale):
     """Q_i ← exp(−scale·[w_i]×)·Q_i: a body rotation by angle scale·|w_i| about w_i (material)."""
     n = Q.shape[2]
@@ -238,7 +245,7 @@ def _row_dot(A, i, B, j):
     return A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result):
     """Couple of a clamp spring between frames A and B (rows d1 d2 d3) over half an element.
 
@@ -271,7 +278,7 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
 N_WORK = 13  # rows of the scratch array internal_loads needs, each of length n
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                    bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                    f_shear, f_bend, f_inertia, f_twist, local_twist,
@@ -419,7 +426,7 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
     energies[1] = bend_energy
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
     for i in range(rest_radius.shape[0]):
         if incompressible:
@@ -428,7 +435,7 @@ def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
             radius[i] = f_radius * rest_radius[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _apply_held(x, v, ints, floats, start_position, end_position, displacement, displacement_rate):
     """Overwrite held node positions and velocities: prescribed motions are exact."""
     n = x.shape[1] - 1
@@ -441,7 +448,7 @@ def _apply_held(x, v, ints, floats, start_position, end_position, displacement, 
             v[c, n] = displacement_rate * floats[F_AXIS + c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _drag_factors(nu_dt):
     """(e^{−x}, (1 − e^{−x})/x) for x = ν·dt, with the series near 0."""
     if nu_dt < 1e-6:
@@ -450,7 +457,7 @@ def _drag_factors(nu_dt):
     return decay, (1.0 - decay) / nu_dt
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _hold_velocities(v, ints, floats, displacement_rate):
     n = v.shape[1] - 1
     for c in range(3):
