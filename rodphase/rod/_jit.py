@@ -25,16 +25,17 @@ for _option in LLVM_OPTIONS:
 # on its own file and bytecode only, so an edit of contact.py (or of the options above) alone
 # would leave kernel.advance running the old machine code from its cache, silently; the same
 # for a user who upgrades in place. Every cached function of these modules is keyed on the
-# hash of all of them instead (tests/test_kernel_cache.py).
-KERNEL_MODULES = ("_jit.py", "kernel.py", "contact.py")
+# hash of all of them instead (tests/test_kernel_cache.py). result.py holds the history
+# table the kernel's slot indices come from. Paths are relative to the package.
+KERNEL_MODULES = ("rod/_jit.py", "rod/kernel.py", "rod/contact.py", "result.py")
 
 
 def _kernel_source_hash() -> str:
     digest = hashlib.sha256()
-    here = Path(__file__).resolve().parent
+    package = Path(__file__).resolve().parent.parent
     for name in KERNEL_MODULES:
         digest.update(name.encode())
-        digest.update((here / name).read_bytes())
+        digest.update((package / name).read_bytes())
     digest.update("\n".join(LLVM_OPTIONS).encode())
     return digest.hexdigest()
 

@@ -28,60 +28,96 @@ to the linked copy, and with fastmath the two differed in the last bits (up to 1
 reference scenes, tests/test_kernel_cache.py).
 """
 
+from collections import namedtuple
+
 import numpy as np
 
+from ..result import HISTORY_COLUMNS
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
 from .contact import add_body_forces, add_contact_forces, build_pairs, near_pairs
 
-# integer settings
-I_INCOMPRESSIBLE = 0
-I_CONTACT = 1
-I_EXCLUSION = 2
-I_START_HELD = 3  # 3 entries: x, y, z of node 0 held
-I_START_FRAME_HELD = 6
-I_END_HELD = 7  # 3 entries: x, y, z of node n held
-I_END_FRAME_HELD = 10
-I_SEGMENT_FIRST = 11  # first and last node of the active-agent segment
-I_SEGMENT_LAST = 12
-I_HISTORY_EVERY = 13
-I_CHECK_EVERY = 14
-I_STOP_AT_EQUILIBRIUM = 15
-I_START_BODY = 16  # 1: a rigid rod beyond node 0, along -axis, takes part in contact
-I_END_BODY = 17  # 1: a rigid rod beyond node n, along +axis (the loading rod); = I_START_BODY + 1
-I_PROBE = 18  # 1: an equilibrium ends the hold only if it survives a perturbation (stable)
-N_INTS = 19
+# The kernel's inputs, by name. numba compiles a namedtuple of arrays and scalars into a
+# plain struct (no Python per step) and caches functions taking them; simulate.py fills the
+# fields by name. The field types must not vary between calls (each new combination of
+# types is a new compile): simulate.py casts every scalar (bool, int, float).
 
-# float settings
-F_DT = 0
-F_DAMPING = 1  # 1/s, translational
-F_DAMPING_ROTATION = 2  # 1/s, rotational, about d1 and d2 (half of it about d3)
-F_FRICTION = 3
-F_SLIP_SPEED = 4
-F_SKIN = 5
-F_PENETRATION_LIMIT = 6  # overlap / radius that counts as a failed contact
-F_SPEED_LIMIT = 7  # m/s; faster than this is a blow-up
-F_TOLERANCE = 8
-F_FORCE_SCALE = 9
-F_LENGTH_SCALE = 10
-F_AXIS = 11  # 3 entries: unit rod axis (lab), direction of end rotation and displacement
-F_FORCE_DIRECTION = 14  # 3 entries: unit direction of the end force
-F_GRAVITY = 17  # 3 entries, m/s²
-F_EQUILIBRIUM_AFTER = 20  # no equilibrium stop before this time (controls still moving)
-F_QUADRATIC_DRAG = 21  # 1/m: extra drag rate per unit speed (speed × this, in 1/s)
-F_DRAG_RADIUS = 22  # m: lever that turns spin into a surface speed for the quadratic drag
-F_SETTLE_WINDOW = 23  # s: window over which the mean shape is compared (0: residual test only)
-F_SETTLE_DISTANCE = 24  # m: the mean shape settled if no surface point moved more than this
-F_NEAR_SKIN = 25  # m: gap below which a candidate pair enters the short (near) contact list
-F_BODY_RADIUS = 26  # m: radius of the end bodies (I_START_BODY, I_END_BODY)
-F_PROBE_SIZE = 27  # m: largest node displacement of the stability probe
-F_PROBE_RETURN = 28  # stable once the probe's component along its shape has decayed below this fraction
-F_PROBE_LEAVE = 29  # unstable once that component, or any node's distance, grows past this many probes
-N_FLOATS = 30
+# rest properties of the rod (see model.py and simulate._rod_arrays for how they are built)
+RodProperties = namedtuple("RodProperties", [
+    "rest_length",  # (n,) m
+    "rest_voronoi",  # (n-1,) m
+    "node_mass",  # (n+1,) kg
+    "inertia",  # (3, n) ρ·l0·diag(I1, I2, I3), kg m
+    "shear_stiffness",  # (3, n) diag(4GA/3, 4GA/3, EA), N
+    "bend_stiffness",  # (3, n-1) diag(EI1, EI2, GI3) at the Voronoi domains, N m²
+    "rest_curvature",  # (3, n-1) 1/m; [2] is the rest twist
+    "rest_shear",  # (3, n)
+    "rest_radius",  # (n,) m
+    "contact_k",  # (n,) N/m per element
+    "contact_c",  # (n,) N s/m per element
+    "local_mask",  # (n-1,) 1.0 on the Voronoi domains of the "active agent" segment
+])
+
+# how the ends are held: what the boundary conditions read
+Boundary = namedtuple("Boundary", [
+    "start_held",  # (3,) int64: 1 where x, y, z of node 0 are held
+    "start_frame_held",  # bool: element 0's frame is clamped
+    "end_held",  # (3,) int64: 1 where x, y, z of node n are held
+    "end_frame_held",  # bool: element n-1's frame is clamped
+    "start_position",  # (3,) m, where node 0's held components are held
+    "end_position",  # (3,) m, node n's, before the end displacement control
+    "start_frame",  # (3, 3) the start clamp's frame (rows d1 d2 d3) before its rotation
+    "end_frame",  # (3, 3) the end clamp's
+    "axis",  # (3,) unit rod axis (lab): direction of end rotation and displacement
+    "force_direction",  # (3,) unit direction of the end force
+    "start_body",  # bool: a rigid rod beyond node 0, along -axis, takes part in contact
+    "end_body",  # bool: a rigid rod beyond node n, along +axis (the loading rod)
+    "body_radius",  # m, radius of the end bodies
+    "segment_first",  # int: first node of the active-agent segment
+    "segment_last",  # int: last node of it
+    "gravity",  # (3,) m/s²
+])
+
+# the integrator, contact and the guards
+Settings = namedtuple("Settings", [
+    "dt",  # s
+    "incompressible",  # bool: A·e constant, radius a0/√e; the 1/e and 1/e³ factors
+    "damping",  # 1/s, translational
+    "damping_rotation",  # 1/s, rotational, about d1 and d2 (half of it about d3)
+    "quadratic_drag",  # 1/m: extra drag rate per unit speed (speed × this, in 1/s)
+    "drag_radius",  # m: lever that turns spin into a surface speed for the quadratic drag
+    "contact",  # bool: self-contact on
+    "exclusion",  # int: elements closer than this along the rod never touch
+    "friction",  # Coulomb coefficient
+    "slip_speed",  # m/s, below it friction is viscous
+    "skin",  # m: Verlet-list margin of the candidate pairs
+    "near_skin",  # m: gap below which a candidate pair enters the short (near) contact list
+    "penetration_limit",  # overlap / radius that counts as a failed contact
+    "speed_limit",  # m/s; faster than this is a blow-up
+    "history_every",  # int: steps between history rows
+    "check_every",  # int: steps between guard and equilibrium checks
+    "stop_at_equilibrium",  # bool
+    "equilibrium_after",  # s: no equilibrium stop before this time (controls still moving)
+    "tolerance",  # residual force / force scale, and (squared) kinetic energy / (force scale × L0)
+    "force_scale",  # N
+    "length_scale",  # m
+    "settle_window",  # s: window over which the mean shape is compared (0: residual test only)
+    "settle_distance",  # m: the mean shape settled if no surface point moved more than this
+    "probe",  # bool: an equilibrium ends the hold only if it survives a perturbation (stable)
+    "probe_size",  # m: largest node displacement of the stability probe
+    "probe_return",  # stable once the probe's component along its shape decayed below this fraction
+    "probe_leave",  # unstable once that component, or any node's distance, grows past this many probes
+])
+
+# control tables: piecewise linear in time, row T_* of times (rows, width), values, counts (rows,)
+ControlTables = namedtuple("ControlTables", ["times", "values", "counts"])
+
+# what advance writes: history (H, N_HISTORY), snap_x (H, 3, n+1), snap_d1 (H, 3, n), info (N_INFO,)
+Output = namedtuple("Output", ["history", "snap_x", "snap_d1", "info"])
 
 # control tables
 T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
-T_END_FORCE = 1  # N, along F_FORCE_DIRECTION, on node n
+T_END_FORCE = 1  # N, along the force direction, on node n
 T_END_DISPLACEMENT = 2  # m, along the axis, of the held components of node n
 T_STIFFNESS = 3  # factor on E and G (modulus ramp)
 T_RADIUS = 4  # factor on the radius (growth); rest twist follows as 1/factor
@@ -90,30 +126,30 @@ T_LOCAL_PULL = 6  # N pulling the two ends of the active segment together
 T_START_ROTATION = 7  # rad, about the axis, of the start frame (element 0)
 N_TABLES = 8
 
-# history columns
-H_TIME = 0
-H_END_ROTATION = 1  # rad
-H_END_FORCE = 2  # N, axial force the outside exerts on node n (load or reaction)
-H_END_TORQUE = 3  # N m, axial torque the outside exerts on the end element
-H_END_DISPLACEMENT = 4  # m, of node n along the axis from its reference
-H_APPLIED_FORCE = 5  # N, the end-force control at this time
-H_STRETCH_ENERGY = 6
-H_BEND_ENERGY = 7
-H_KINETIC_ENERGY = 8
-H_CONTACTS = 9
-H_PENETRATION = 10  # largest overlap / radius
-H_RESIDUAL = 11  # largest free nodal force / force scale
-H_STIFFNESS = 12
-H_RADIUS_FACTOR = 13
-H_CONTACT_ENERGY = 14
-H_START_ROTATION = 15  # rad, the start rotation control
-N_HISTORY = 16
+# history slots, from the one table of columns (name, unit, meaning) in result.py
+H_TIME = HISTORY_COLUMNS.index("time")
+H_END_ROTATION = HISTORY_COLUMNS.index("end_rotation")
+H_END_FORCE = HISTORY_COLUMNS.index("end_force")
+H_END_TORQUE = HISTORY_COLUMNS.index("end_torque")
+H_END_DISPLACEMENT = HISTORY_COLUMNS.index("end_displacement")
+H_APPLIED_FORCE = HISTORY_COLUMNS.index("applied_force")
+H_STRETCH_ENERGY = HISTORY_COLUMNS.index("stretch_energy")
+H_BEND_ENERGY = HISTORY_COLUMNS.index("bend_energy")
+H_KINETIC_ENERGY = HISTORY_COLUMNS.index("kinetic_energy")
+H_CONTACTS = HISTORY_COLUMNS.index("contacts")
+H_PENETRATION = HISTORY_COLUMNS.index("penetration")
+H_RESIDUAL = HISTORY_COLUMNS.index("residual")
+H_STIFFNESS = HISTORY_COLUMNS.index("stiffness_factor")
+H_RADIUS_FACTOR = HISTORY_COLUMNS.index("radius_factor")
+H_CONTACT_ENERGY = HISTORY_COLUMNS.index("contact_energy")
+H_START_ROTATION = HISTORY_COLUMNS.index("start_rotation")
+N_HISTORY = len(HISTORY_COLUMNS)
 
 # cos 135°: neighbouring frames (and an end frame and its clamp) turned further apart than
 # this bring the matrix log near its branch cut at 180°, where twist would silently wrap
 COS_MAX_TURN = -0.7071
 
-# status codes
+# status codes advance returns
 S_COMPLETED = 0
 S_EQUILIBRIUM = 1
 S_NAN = 2
@@ -121,6 +157,24 @@ S_SPEED = 3
 S_PENETRATION = 4
 S_RESOLUTION = 5  # neighbouring frames turned by more than 135°: the rod is under-resolved
 S_CLAMP_LAG = 6  # an end frame lags its turning clamp by more than 135°: twisted too fast
+
+# The guards, one row each (as diffrax's RESULTS): the short name for diagnostics["guard"]
+# (what a caller may act on), what tripped, where info[D_WHERE] points, and what to change.
+Guard = namedtuple("Guard", ["name", "message", "where", "advice"])
+_STEP_ADVICE = ("Try a smaller solver.dt or solver.safety, more solver.damping, or a stiffer "
+                "contact.stiffness.")
+GUARDS = {
+    S_NAN: Guard("non_finite", "non-finite state (NaN or inf)", "node", _STEP_ADVICE),
+    S_SPEED: Guard("speed", "runaway velocity", "node", _STEP_ADVICE),
+    S_PENETRATION: Guard("penetration", "contact penetration", "element", _STEP_ADVICE),
+    S_RESOLUTION: Guard("resolution",
+                        "under-resolved rod (neighbouring frames turned by more than 135°)",
+                        "Voronoi domain",
+                        "Use more rod.elements (twist per element = Φa·L0/(a·n) rad)."),
+    S_CLAMP_LAG: Guard("clamp_lag", "end frame lagging its turning clamp by more than 135°",
+                       "element", "The twist is put in faster than it spreads along the rod: "
+                       "lower loading.twist_rate (turns/s)."),
+}
 
 # info entries
 D_WHERE = 0  # node or element index where a guard tripped
@@ -436,16 +490,16 @@ def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
 
 
 @njit(cache=True, inline="always")
-def _apply_held(x, v, ints, floats, start_position, end_position, displacement, displacement_rate):
+def _apply_held(x, v, ends, displacement, displacement_rate):
     """Overwrite held node positions and velocities: prescribed motions are exact."""
     n = x.shape[1] - 1
     for c in range(3):
-        if ints[I_START_HELD + c]:
-            x[c, 0] = start_position[c]
+        if ends.start_held[c]:
+            x[c, 0] = ends.start_position[c]
             v[c, 0] = 0.0
-        if ints[I_END_HELD + c]:
-            x[c, n] = end_position[c] + displacement * floats[F_AXIS + c]
-            v[c, n] = displacement_rate * floats[F_AXIS + c]
+        if ends.end_held[c]:
+            x[c, n] = ends.end_position[c] + displacement * ends.axis[c]
+            v[c, n] = displacement_rate * ends.axis[c]
 
 
 @njit(cache=True, inline="always")
@@ -458,67 +512,86 @@ def _drag_factors(nu_dt):
 
 
 @njit(cache=True, inline="always")
-def _hold_velocities(v, ints, floats, displacement_rate):
+def _hold_velocities(v, ends, displacement_rate):
     n = v.shape[1] - 1
     for c in range(3):
-        if ints[I_START_HELD + c]:
+        if ends.start_held[c]:
             v[c, 0] = 0.0
-        if ints[I_END_HELD + c]:
-            v[c, n] = displacement_rate * floats[F_AXIS + c]
+        if ends.end_held[c]:
+            v[c, n] = displacement_rate * ends.axis[c]
 
 
 @njit(cache=True, fastmath=_FASTMATH)
-def advance(x, v, Q, w, t_start, n_steps,
-            rest_length, rest_voronoi, node_mass, inertia, shear_stiffness, bend_stiffness,
-            rest_curvature, rest_shear, rest_radius, contact_k, contact_c, local_mask,
-            probe_shape, ints, floats, start_position, end_position, start_frame, end_frame,
-            table_t, table_v, table_n,
-            history, snap_x, snap_d1, info):
-    """Advance the rod by up to n_steps steps of floats[F_DT] from time t_start, in place.
+def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out):
+    """Advance the rod by up to n_steps steps of settings.dt from time t_start, in place.
 
-    history (H, N_HISTORY), snap_x (H, 3, n+1) and snap_d1 (H, 3, n) receive a row every
-    ints[I_HISTORY_EVERY] steps and at the end; H must be ≥ n_steps // every + 2.
+    rod: RodProperties, ends: Boundary, settings: Settings, tables: ControlTables, out: Output.
+    out.history (H, N_HISTORY), out.snap_x (H, 3, n+1) and out.snap_d1 (H, 3, n) receive a
+    row every settings.history_every steps and at the end; H must be ≥ n_steps // every + 2.
     probe_shape (3, n+1), largest row norm 1 and zero on held components, is the direction of
-    the stability probe (ints[I_PROBE]): a candidate equilibrium of a hold is displaced by
-    floats[F_PROBE_SIZE] along it, and the hold ends only once that displacement has decayed.
-    Returns (status, steps_taken, t_end, rows_written); info (N_INFO,) gets diagnostics.
+    the stability probe (settings.probe): a candidate equilibrium of a hold is displaced by
+    settings.probe_size along it, and the hold ends only once that displacement has decayed.
+    Returns (status, steps_taken, t_end, rows_written); out.info (N_INFO,) gets diagnostics.
     """
+    rest_length = rod.rest_length
+    rest_voronoi = rod.rest_voronoi
+    node_mass = rod.node_mass
+    inertia = rod.inertia
+    shear_stiffness = rod.shear_stiffness
+    bend_stiffness = rod.bend_stiffness
+    rest_curvature = rod.rest_curvature
+    rest_shear = rod.rest_shear
+    rest_radius = rod.rest_radius
+    contact_k = rod.contact_k
+    contact_c = rod.contact_c
+    local_mask = rod.local_mask
+    start_position = ends.start_position
+    end_position = ends.end_position
+    start_frame = ends.start_frame
+    end_frame = ends.end_frame
+    table_t = tables.times
+    table_v = tables.values
+    table_n = tables.counts
+    history = out.history
+    snap_x = out.snap_x
+    snap_d1 = out.snap_d1
+    info = out.info
     n = rest_length.shape[0]
-    dt = floats[F_DT]
-    incompressible = ints[I_INCOMPRESSIBLE] != 0
-    contact_on = ints[I_CONTACT] != 0
-    exclusion = ints[I_EXCLUSION]
-    history_every = max(ints[I_HISTORY_EVERY], 1)
-    check_every = max(ints[I_CHECK_EVERY], 1)
-    stop_at_equilibrium = ints[I_STOP_AT_EQUILIBRIUM] != 0
-    seg_first = ints[I_SEGMENT_FIRST]
-    seg_last = ints[I_SEGMENT_LAST]
-    axis = floats[F_AXIS:F_AXIS + 3].copy()
-    force_dir = floats[F_FORCE_DIRECTION:F_FORCE_DIRECTION + 3].copy()
-    gravity = floats[F_GRAVITY:F_GRAVITY + 3].copy()
+    dt = settings.dt
+    incompressible = settings.incompressible
+    contact_on = settings.contact
+    exclusion = settings.exclusion
+    history_every = max(settings.history_every, 1)
+    check_every = max(settings.check_every, 1)
+    stop_at_equilibrium = settings.stop_at_equilibrium
+    seg_first = ends.segment_first
+    seg_last = ends.segment_last
+    axis = ends.axis.copy()
+    force_dir = ends.force_direction.copy()
+    gravity = ends.gravity.copy()
     # Linear drag integrated exactly over a step (integrating factor): v' = a − νv gives
     # v ← v·e^{−νdt} + a·dt·(1 − e^{−νdt})/(νdt). Stable for any ν, and right in the
     # overdamped limit νdt ≫ 1 (velocity a/ν), where multiplying by e^{−νdt} alone stalls.
-    decay, gain = _drag_factors(floats[F_DAMPING] * dt)
+    decay, gain = _drag_factors(settings.damping * dt)
     decay_rotation = np.empty(3)
     gain_rotation = np.empty(3)
-    decay_rotation[0], gain_rotation[0] = _drag_factors(floats[F_DAMPING_ROTATION] * dt)
+    decay_rotation[0], gain_rotation[0] = _drag_factors(settings.damping_rotation * dt)
     decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
-    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * floats[F_DAMPING_ROTATION] * dt)
-    friction = floats[F_FRICTION]
-    slip_speed = floats[F_SLIP_SPEED]
-    skin = floats[F_SKIN]
-    near_skin = floats[F_NEAR_SKIN]
-    penetration_limit = floats[F_PENETRATION_LIMIT]
-    speed_limit = floats[F_SPEED_LIMIT]
-    tolerance = floats[F_TOLERANCE]
-    force_scale = floats[F_FORCE_SCALE]
-    length_scale = floats[F_LENGTH_SCALE]
-    equilibrium_after = floats[F_EQUILIBRIUM_AFTER]
-    quadratic_drag = floats[F_QUADRATIC_DRAG]
-    drag_radius = floats[F_DRAG_RADIUS]
-    settle_window = floats[F_SETTLE_WINDOW]
-    settle_distance = floats[F_SETTLE_DISTANCE]
+    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
+    friction = settings.friction
+    slip_speed = settings.slip_speed
+    skin = settings.skin
+    near_skin = settings.near_skin
+    penetration_limit = settings.penetration_limit
+    speed_limit = settings.speed_limit
+    tolerance = settings.tolerance
+    force_scale = settings.force_scale
+    length_scale = settings.length_scale
+    equilibrium_after = settings.equilibrium_after
+    quadratic_drag = settings.quadratic_drag
+    drag_radius = settings.drag_radius
+    settle_window = settings.settle_window
+    settle_distance = settings.settle_distance
     # Window means of node positions and of d1 (times the radius: a surface point), summed
     # at every check; the shape has settled when two consecutive window means agree and
     # within the window no point strayed from its mean (rms) by more than the same distance.
@@ -565,8 +638,8 @@ def advance(x, v, Q, w, t_start, n_steps,
     contact_energy = 0.0
     residual = np.inf
     kinetic = np.inf
-    held_start_frame = ints[I_START_FRAME_HELD] != 0
-    held_end_frame = ints[I_END_FRAME_HELD] != 0
+    held_start_frame = ends.start_frame_held
+    held_end_frame = ends.end_frame_held
     clamp = np.empty((3, 3))
     couple = np.empty(8)
     kinetic_before = 0.0
@@ -581,8 +654,8 @@ def advance(x, v, Q, w, t_start, n_steps,
     # ends on an unstable equilibrium only where symmetry keeps the unstable mode unexcited
     # (the straight rod, a flat loop) and no contact confines it; a coil or braid in
     # contact creeps by more than a probe's return distance while its shape is settled.
-    probe_on = ints[I_PROBE] != 0 and stop_at_equilibrium
-    probe_size = floats[F_PROBE_SIZE]
+    probe_on = settings.probe and stop_at_equilibrium
+    probe_size = settings.probe_size
     probe_running = False
     probe_reference = x.copy()
     probe_norm2 = 0.0
@@ -615,7 +688,7 @@ def advance(x, v, Q, w, t_start, n_steps,
         f_radius = table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t_half)
         local_twist = table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t_half)
         local_pull = table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t_half)
-        _apply_held(x, v, ints, floats, start_position, end_position, disp, disp_rate)
+        _apply_held(x, v, ends, disp, disp_rate)
 
         # Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r (a·κ3⁰ fixed).
         r2 = f_radius * f_radius
@@ -719,10 +792,10 @@ def advance(x, v, Q, w, t_start, n_steps,
             # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
             # strand can pass around such an end, so link leaves only where the scene lets it.
             for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
-                if ints[I_START_BODY + which] != 0:
+                if (ends.end_body if which == 1 else ends.start_body):
                     body_touching, body_worst, body_energy = add_body_forces(
                         x, v, radius, contact_k, contact_c, f_stiff, which * n,
-                        2.0 * which - 1.0, axis, floats[F_BODY_RADIUS], exclusion, force)
+                        2.0 * which - 1.0, axis, ends.body_radius, exclusion, force)
                     touching += body_touching
                     contact_energy += body_energy
                     if body_worst > worst:
@@ -795,7 +868,7 @@ def advance(x, v, Q, w, t_start, n_steps,
                 w[0, i] *= f
                 w[1, i] *= f
                 w[2, i] *= f
-        _hold_velocities(v, ints, floats, disp_rate)
+        _hold_velocities(v, ends, disp_rate)
 
         if check or record:
             # Residual: largest nodal force and element torque / length on free degrees of freedom.
@@ -805,7 +878,7 @@ def advance(x, v, Q, w, t_start, n_steps,
                 fm = 0.0
                 vv = 0.0
                 for c in range(3):
-                    held = (i == 0 and ints[I_START_HELD + c] != 0) or (i == n and ints[I_END_HELD + c] != 0)
+                    held = (i == 0 and ends.start_held[c] != 0) or (i == n and ends.end_held[c] != 0)
                     if not held:
                         fm += force[c, i] * force[c, i]
                     vv += v[c, i] * v[c, i]
@@ -943,11 +1016,11 @@ def advance(x, v, Q, w, t_start, n_steps,
                         along += d0 * probe_shape[0, i] + d1 * probe_shape[1, i] + d2 * probe_shape[2, i]
                     away = np.sqrt(away)
                     along = abs(along) / (probe_size * probe_norm2)
-                    leave = floats[F_PROBE_LEAVE]
+                    leave = settings.probe_leave
                     if away > leave * probe_size or along > leave:
                         probe_running = False
                         probes_left += 1
-                    elif at_rest and along < floats[F_PROBE_RETURN]:
+                    elif at_rest and along < settings.probe_return:
                         accept = True
                 elif at_rest and touching > 0:
                     accept = True  # held by contact: see the note on the probe above
@@ -978,7 +1051,7 @@ def advance(x, v, Q, w, t_start, n_steps,
 
     if status == S_COMPLETED or status == S_EQUILIBRIUM:
         disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t)
-        _apply_held(x, v, ints, floats, start_position, end_position, disp, 0.0)
+        _apply_held(x, v, ends, disp, 0.0)
     info[D_MAX_PENETRATION] = max_penetration
     info[D_REBUILDS] = rebuilds
     info[D_MAX_PAIRS] = max_pairs
