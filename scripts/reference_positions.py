@@ -38,13 +38,15 @@ SCENES = {
 }
 
 
-def run_all() -> dict[str, np.ndarray]:
+def run_all(only=None) -> dict[str, np.ndarray]:
     from rodphase import config as C
     from rodphase.scenes import SCENES as BUILDERS
     from rodphase.sweep import run_scene
 
     out = {}
     for name, overrides in SCENES.items():
+        if only and name not in only:
+            continue
         cfg = C.load_scene(name, list(overrides.items()), BUILDERS)
         r = run_scene(cfg.plain(), topology=False)
         print(f"{name:18s} {r.status:14s} steps {r.diagnostics['steps']:7d}  "
@@ -63,7 +65,7 @@ def compare(a_path: str, b_path: str) -> bool:
     a = np.load(a_path)
     b = np.load(b_path)
     same = True
-    for key in sorted(set(a.files) | set(b.files)):
+    for key in sorted(set(a.files) & set(b.files)):
         if key not in a.files or key not in b.files:
             print(f"{key}: only in one file")
             same = False
@@ -84,10 +86,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("paths", nargs="+")
     parser.add_argument("--compare", action="store_true", help="compare two saved .npz files")
+    parser.add_argument("--only", nargs="+", choices=sorted(SCENES), help="run these scenes only")
     args = parser.parse_args(argv)
     if args.compare:
         return 0 if compare(*args.paths) else 1
-    np.savez(args.paths[0], **run_all())
+    np.savez(args.paths[0], **run_all(args.only))
     return 0
 
 

@@ -355,7 +355,8 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
     c0, c1, c2 = work[9], work[10], work[11]  # couple / ε³ per Voronoi domain
     density = work[12]
 
-    # elements: stretch and shear, their couple, and the rigid-body rotation terms
+    # elements: the internal force n = S(σ − σ0) of stretch and shear, the shear couple,
+    # and the rigid-body rotation terms (Lagrangian transport, unsteady dilatation)
     for i in range(n):
         t0 = x[0, i + 1] - x[0, i]
         t1 = x[1, i + 1] - x[1, i]
@@ -456,7 +457,8 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         ka0[j] = k0
         ka1[j] = k1
         ka2[j] = k2
-    # elements: the difference of the couples, plus κ × τ·D0/ε³ split between both sides
+    # elements: the bend-twist couple, the difference of the Voronoi couples B(κ − κ0)/ε³,
+    # plus κ × τ·D0/ε³ split between both sides
     # (with the full curvature κ, not κ − κ0)
     for i in range(n):
         acc0 = 0.0
@@ -521,6 +523,402 @@ def _hold_velocities(v, ends, displacement_rate):
             v[c, n] = displacement_rate * ends.axis[c]
 
 
+# The pieces of one step, in the order advance composes them: controls -> loads (internal,
+# clamps, contact, external) -> kick -> guards -> record -> drift -> settle/equilibrium.
+# Each is inlined into advance (see the module docstring); a piece that can trip a guard
+# returns the status code and advance stops on anything but S_COMPLETED.
+
+ControlValues = namedtuple("ControlValues", [
+    "end_rotation", "start_rotation", "displacement", "displacement_rate", "end_force",
+    "stiffness", "radius", "local_twist", "local_pull"])
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _controls(tables, t):
+    """The controls at time t (positions live at half steps: advance passes t + dt/2)."""
+    table_t = tables.times
+    table_v = tables.values
+    table_n = tables.counts
+    return ControlValues(
+        table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t),
+        table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t),
+        table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t),
+        table_slope(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t),
+        table_value(table_t[T_END_FORCE], table_v[T_END_FORCE], table_n[T_END_FORCE], t),
+        table_value(table_t[T_STIFFNESS], table_v[T_STIFFNESS], table_n[T_STIFFNESS], t),
+        table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t),
+        table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t),
+        table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t))
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _start_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, fb,
+                        incompressible, torque, energies, clamp, couple):
+    """Bend-twist couple of the start clamp's spring on element 0; couple[7] is the cosine of
+    the angle between the clamp and the element's frame (the clamp-lag guard)."""
+    rest_length = rod.rest_length
+    rest_curvature = rod.rest_curvature
+    bend_stiffness = rod.bend_stiffness
+    rotated_frame(frame, axis, rotation, clamp)
+    e0 = dilatation[0]
+    _clamp_couple(clamp, Q[:, :, 0], 0.5 * rest_length[0], rest_curvature[0, 0],
+                  rest_curvature[1, 0], f_radius_inv * rest_curvature[2, 0],
+                  fb * bend_stiffness[0, 0], fb * bend_stiffness[1, 0], fb * bend_stiffness[2, 0],
+                  1.0 / (e0 * e0 * e0) if incompressible else 1.0, couple)
+    for c in range(3):
+        torque[c, 0] += couple[3 + c] - couple[c]
+    energies[1] += couple[6]
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, fb,
+                      incompressible, torque, energies, clamp, couple):
+    """Bend-twist couple of the end clamp's spring on element n-1; returns the axial torque
+    the clamp exerts on it. couple[7] as for the start clamp."""
+    n = rod.rest_length.shape[0]
+    rest_length = rod.rest_length
+    rest_curvature = rod.rest_curvature
+    bend_stiffness = rod.bend_stiffness
+    clamp_torque = 0.0
+    rotated_frame(frame, axis, rotation, clamp)
+    e1 = dilatation[n - 1]
+    _clamp_couple(Q[:, :, n - 1], clamp, 0.5 * rest_length[n - 1], rest_curvature[0, n - 2],
+                  rest_curvature[1, n - 2], f_radius_inv * rest_curvature[2, n - 2],
+                  fb * bend_stiffness[0, n - 2], fb * bend_stiffness[1, n - 2],
+                  fb * bend_stiffness[2, n - 2], 1.0 / (e1 * e1 * e1) if incompressible else 1.0,
+                  couple)
+    for c in range(3):
+        torque[c, n - 1] += couple[c] + couple[3 + c]
+        clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
+                         + Q[2, c, n - 1] * couple[2]) * axis[c]
+    energies[1] += couple[6]
+    return clamp_torque
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
+                   radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
+                   radius_cut, rebuilds, near_rebuilds, max_pairs, force):
+    """Self-contact and contact with the end bodies: penalty forces added to `force`.
+
+    Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
+    a node has moved skin/4 since x_build; `near` (the pairs of it within near_skin of
+    touching) when gaps could have closed by near_skin since x_near / radius_near.
+    Returns the lists and their counters, then (touching pairs, largest overlap / radius,
+    its element, contact energy).
+    """
+    n = lengths.shape[0]
+    incompressible = settings.incompressible
+    exclusion = settings.exclusion
+    skin = settings.skin
+    near_skin = settings.near_skin
+    contact_k = rod.contact_k
+    contact_c = rod.contact_c
+    _radii(rod.rest_radius, dilatation, f_radius, incompressible, radius)
+    moved = 0.0
+    moved_near = 0.0
+    for i in range(n + 1):
+        d0 = x[0, i] - x_build[0, i]
+        d1 = x[1, i] - x_build[1, i]
+        d2 = x[2, i] - x_build[2, i]
+        moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
+        d0 = x[0, i] - x_near[0, i]
+        d1 = x[1, i] - x_near[1, i]
+        d2 = x[2, i] - x_near[2, i]
+        moved_near = max(moved_near, d0 * d0 + d1 * d1 + d2 * d2)
+    grown = 0.0
+    widest = 0.0
+    for i in range(n):
+        grown = max(grown, radius[i] - radius_near[i])
+        widest = max(widest, radius[i])
+    # A pair outside the long list needs its gap to shrink by > skin: midpoints and
+    # half-lengths each move by at most the largest node displacement, so 4·moved.
+    if rebuilds == 0 or 16.0 * moved > skin * skin or widest > radius_cut:
+        longest = 0.0
+        for i in range(n):
+            longest = max(longest, lengths[i])
+        radius_cut = 1.1 * widest
+        pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
+        if near.shape[1] < pairs.shape[1]:
+            near = np.empty((2, pairs.shape[1]), dtype=np.int64)
+        x_build[:, :] = x
+        rebuilds += 1
+        max_pairs = max(max_pairs, n_pairs)
+        moved_near = np.inf
+    # A gap changes by at most the two segments' largest node displacements plus the
+    # growth of the two radii (closest_parameters' fallback for segments parallel to
+    # 1e-6 rad adds up to 1e-6 of an element length: negligible against near_skin).
+    # With near_skin ≥ skin/2 this never fires between grid builds: the old, one-list
+    # behaviour.
+    if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
+        n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
+        x_near[:, :] = x
+        radius_near[:] = radius
+        near_rebuilds += 1
+    touching, worst, worst_at, contact_energy = add_contact_forces(
+        x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
+        settings.slip_speed, 1.0 if incompressible else 0.0, force)
+    # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
+    # strand can pass around such an end, so link leaves only where the scene lets it.
+    for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
+        if (ends.end_body if which == 1 else ends.start_body):
+            body_touching, body_worst, body_energy = add_body_forces(
+                x, v, radius, contact_k, contact_c, f_stiff, which * n,
+                2.0 * which - 1.0, axis, ends.body_radius, exclusion, force)
+            touching += body_touching
+            contact_energy += body_energy
+            if body_worst > worst:
+                worst, worst_at = body_worst, which * (n - 1)
+    return (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
+            touching, worst, worst_at, contact_energy)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _external_loads(x, node_mass, r2, end_force, force_dir, gravity, local_pull, seg_first,
+                    seg_last, force):
+    """End force, gravity and the active agent's pull, added to `force`."""
+    n = x.shape[1] - 1
+    for c in range(3):
+        force[c, n] += end_force * force_dir[c]
+    if gravity[0] != 0.0 or gravity[1] != 0.0 or gravity[2] != 0.0:
+        for c in range(3):
+            for i in range(n + 1):
+                force[c, i] += node_mass[i] * r2 * gravity[c]
+    if local_pull != 0.0 and seg_last > seg_first:
+        d0 = x[0, seg_last] - x[0, seg_first]
+        d1 = x[1, seg_last] - x[1, seg_first]
+        d2 = x[2, seg_last] - x[2, seg_first]
+        dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if dn > 0.0:
+            p = local_pull / dn
+            force[0, seg_first] += p * d0
+            force[1, seg_first] += p * d1
+            force[2, seg_first] += p * d2
+            force[0, seg_last] -= p * d0
+            force[1, seg_last] -= p * d1
+            force[2, seg_last] -= p * d2
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _kinetic_energy(v, w, node_mass, inertia, r2):
+    n = w.shape[1]
+    kinetic = 0.0
+    for i in range(n + 1):
+        kinetic += 0.5 * node_mass[i] * r2 * (v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
+    for i in range(n):
+        for c in range(3):
+            kinetic += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+    return kinetic
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
+          decay_rotation, gain_rotation, incompressible, quadratic_drag, drag_radius):
+    """Velocities from the loads over a step, with the linear drag integrated exactly; the
+    angular momentum balance carries the dilatation factor e of an incompressible rod."""
+    n = w.shape[1]
+    for c in range(3):
+        for i in range(n + 1):
+            v[c, i] = v[c, i] * decay + gain * dt * force[c, i] * inv_mass[i] / r2
+    for c in range(3):
+        for i in range(n):
+            gi = dilatation[i] if incompressible else 1.0
+            w[c, i] = (w[c, i] * decay_rotation[c]
+                       + gain_rotation[c] * dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2))
+    if quadratic_drag > 0.0:
+        # Drag growing with speed (implicit, so stable at any speed): quasi-static motion
+        # barely feels it, but a snap-through cannot turn stored twist into speeds that
+        # no contact spring can stop. Equilibria do not depend on it.
+        for i in range(n + 1):
+            speed = np.sqrt(v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
+            f = 1.0 / (1.0 + quadratic_drag * speed * dt)
+            v[0, i] *= f
+            v[1, i] *= f
+            v[2, i] *= f
+        for i in range(n):
+            spin = drag_radius * np.sqrt(w[0, i] ** 2 + w[1, i] ** 2 + w[2, i] ** 2)
+            f = 1.0 / (1.0 + quadratic_drag * spin * dt)
+            w[0, i] *= f
+            w[1, i] *= f
+            w[2, i] *= f
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _guards(v, w, force, torque, ends, node_mass, inertia, rest_length, r2, speed_limit, info):
+    """Residual (largest nodal force and element torque per length on free degrees of
+    freedom), kinetic energy, and the non-finite and speed guards.
+    Returns (status, residual [N], kinetic energy [J])."""
+    n = w.shape[1]
+    res = 0.0
+    kin = 0.0
+    for i in range(n + 1):
+        fm = 0.0
+        vv = 0.0
+        for c in range(3):
+            held = (i == 0 and ends.start_held[c] != 0) or (i == n and ends.end_held[c] != 0)
+            if not held:
+                fm += force[c, i] * force[c, i]
+            vv += v[c, i] * v[c, i]
+        res = max(res, np.sqrt(fm))
+        kin += 0.5 * node_mass[i] * r2 * vv
+        if not np.isfinite(vv) or not np.isfinite(fm):
+            info[D_WHERE] = i
+            info[D_VALUE] = vv
+            return S_NAN, res, kin
+        if vv > speed_limit * speed_limit:
+            info[D_WHERE] = i
+            info[D_VALUE] = np.sqrt(vv)
+            return S_SPEED, res, kin
+    for i in range(n):
+        tm = 0.0
+        for c in range(3):
+            tm += torque[c, i] * torque[c, i]
+            kin += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+        res = max(res, np.sqrt(tm) / rest_length[i])
+    if not np.isfinite(kin) or not np.isfinite(res):
+        info[D_WHERE] = -1
+        info[D_VALUE] = kin
+        return S_NAN, res, kin
+    return S_COMPLETED, res, kin
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _record(row, x, v, Q, w, force, dt, t_next, end_force, force_dir, axis, end_position,
+            tables, clamp_torque, energies, kinetic, touching, worst, residual, f_stiff,
+            f_radius, contact_energy, out):
+    """One history row and snapshot, at t + dt (positions are at t + dt/2 inside the loop)."""
+    n = x.shape[1] - 1
+    history = out.history
+    snap_x = out.snap_x
+    snap_d1 = out.snap_d1
+    table_t = tables.times
+    table_v = tables.values
+    table_n = tables.counts
+    # positions are at t + dt/2; bring the recorded ones to t + dt
+    for c in range(3):
+        for i in range(n + 1):
+            snap_x[row, c, i] = x[c, i] + 0.5 * dt * v[c, i]
+    Qs = Q.copy()
+    rotate_frames(Qs, w, 0.5 * dt)
+    for c in range(3):
+        for i in range(n):
+            snap_d1[row, c, i] = Qs[0, c, i]
+    # axial force the outside exerts on node n: minus the rod's force on it
+    rod_on_end = 0.0
+    for c in range(3):
+        rod_on_end += (force[c, n] - end_force * force_dir[c]) * axis[c]
+    end_disp = 0.0
+    for c in range(3):
+        end_disp += (snap_x[row, c, n] - end_position[c]) * axis[c]
+    history[row, H_TIME] = t_next
+    history[row, H_END_ROTATION] = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION],
+                                               table_n[T_END_ROTATION], t_next)
+    history[row, H_END_FORCE] = -rod_on_end
+    history[row, H_END_TORQUE] = clamp_torque
+    history[row, H_END_DISPLACEMENT] = end_disp
+    history[row, H_APPLIED_FORCE] = end_force
+    history[row, H_STRETCH_ENERGY] = energies[0]
+    history[row, H_BEND_ENERGY] = energies[1]
+    history[row, H_KINETIC_ENERGY] = kinetic
+    history[row, H_CONTACTS] = touching
+    history[row, H_PENETRATION] = worst
+    history[row, H_RESIDUAL] = residual
+    history[row, H_STIFFNESS] = f_stiff
+    history[row, H_RADIUS_FACTOR] = f_radius
+    history[row, H_CONTACT_ENERGY] = contact_energy
+    history[row, H_START_ROTATION] = table_value(
+        table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_next)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _drift(x, v, Q, w, h):
+    """Positions and frames moved by the velocities over h."""
+    n = w.shape[1]
+    for c in range(3):
+        for i in range(n + 1):
+            x[c, i] += h * v[c, i]
+    rotate_frames(Q, w, h)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equilibrium_after,
+                    window_sum, window_squares, window_mean, window_count, window_start,
+                    have_mean, settle_motion, settled):
+    """Window means of node positions and of d1 (times the radius: a surface point), summed
+    at every check; the shape has settled when two consecutive window means agree and within
+    the window no point strayed from its mean (rms) by more than the same distance.
+    Returns (window_count, window_start, have_mean, settle_motion, settled)."""
+    n = Q.shape[2]
+    if t < equilibrium_after:
+        window_start = t  # controls still moving: windows start when they stop
+        return window_count, window_start, have_mean, settle_motion, settled
+    for c in range(3):
+        for i in range(n + 1):
+            window_sum[c, i] += x[c, i]
+            window_squares[c, i] += x[c, i] * x[c, i]
+        for i in range(n):
+            surface = drag_radius * Q[0, c, i]
+            window_sum[3 + c, i] += surface
+            window_squares[3 + c, i] += surface * surface
+    window_count += 1
+    if t - window_start >= settle_window:
+        motion = 0.0
+        spread = 0.0
+        for i in range(n + 1):
+            dx = 0.0
+            dd = 0.0
+            vx = 0.0
+            vd = 0.0
+            for c in range(3):
+                mean = window_sum[c, i] / window_count
+                dx += (mean - window_mean[c, i]) ** 2
+                vx += window_squares[c, i] / window_count - mean * mean
+                window_mean[c, i] = mean
+                mean = window_sum[3 + c, i] / window_count
+                dd += (mean - window_mean[3 + c, i]) ** 2
+                vd += window_squares[3 + c, i] / window_count - mean * mean
+                window_mean[3 + c, i] = mean
+            motion = max(motion, np.sqrt(dx) + np.sqrt(dd))
+            spread = max(spread, np.sqrt(max(vx, 0.0)) + np.sqrt(max(vd, 0.0)))
+        if have_mean:
+            settle_motion = max(motion, spread)
+            settled = settle_motion < settle_distance
+        have_mean = True
+        window_sum[:, :] = 0.0
+        window_squares[:, :] = 0.0
+        window_count = 0
+        window_start = t
+    return window_count, window_start, have_mean, settle_motion, settled
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _probe_distance(x, probe_reference, probe_shape, probe_size, probe_norm2):
+    """(largest node distance from the probed candidate, the probe's remaining component
+    along its shape as a fraction of the probe)."""
+    n = x.shape[1] - 1
+    away = 0.0
+    along = 0.0
+    for i in range(n + 1):
+        d0 = x[0, i] - probe_reference[0, i]
+        d1 = x[1, i] - probe_reference[1, i]
+        d2 = x[2, i] - probe_reference[2, i]
+        away = max(away, d0 * d0 + d1 * d1 + d2 * d2)
+        along += d0 * probe_shape[0, i] + d1 * probe_shape[1, i] + d2 * probe_shape[2, i]
+    away = np.sqrt(away)
+    along = abs(along) / (probe_size * probe_norm2)
+    return away, along
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _start_probe(x, probe_reference, probe_shape, probe_size):
+    """Displace the candidate equilibrium by probe_size along probe_shape."""
+    n = x.shape[1] - 1
+    probe_reference[:, :] = x
+    for c in range(3):
+        for i in range(n + 1):
+            x[c, i] += probe_size * probe_shape[c, i]
+
+
 @njit(cache=True, fastmath=_FASTMATH)
 def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out):
     """Advance the rod by up to n_steps steps of settings.dt from time t_start, in place.
@@ -532,6 +930,10 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     the stability probe (settings.probe): a candidate equilibrium of a hold is displaced by
     settings.probe_size along it, and the hold ends only once that displacement has decayed.
     Returns (status, steps_taken, t_end, rows_written); out.info (N_INFO,) gets diagnostics.
+
+    A step composes the pieces above: controls at the half step -> loads (internal_loads,
+    the clamp couples, contact, external loads) -> kick -> guards -> record -> drift -> the
+    settled-shape windows and the equilibrium test (with the stability probe).
     """
     rest_length = rod.rest_length
     rest_voronoi = rod.rest_voronoi
@@ -542,25 +944,16 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     rest_curvature = rod.rest_curvature
     rest_shear = rod.rest_shear
     rest_radius = rod.rest_radius
-    contact_k = rod.contact_k
-    contact_c = rod.contact_c
     local_mask = rod.local_mask
-    start_position = ends.start_position
     end_position = ends.end_position
-    start_frame = ends.start_frame
-    end_frame = ends.end_frame
     table_t = tables.times
     table_v = tables.values
     table_n = tables.counts
-    history = out.history
-    snap_x = out.snap_x
-    snap_d1 = out.snap_d1
     info = out.info
     n = rest_length.shape[0]
     dt = settings.dt
     incompressible = settings.incompressible
     contact_on = settings.contact
-    exclusion = settings.exclusion
     history_every = max(settings.history_every, 1)
     check_every = max(settings.check_every, 1)
     stop_at_equilibrium = settings.stop_at_equilibrium
@@ -578,10 +971,6 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     decay_rotation[0], gain_rotation[0] = _drag_factors(settings.damping_rotation * dt)
     decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
     decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
-    friction = settings.friction
-    slip_speed = settings.slip_speed
-    skin = settings.skin
-    near_skin = settings.near_skin
     penetration_limit = settings.penetration_limit
     speed_limit = settings.speed_limit
     tolerance = settings.tolerance
@@ -618,12 +1007,10 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     work = np.zeros((N_WORK, n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
+    # the two-level Verlet list of contact (see _contact_loads)
     x_build = x.copy()
     pairs = np.empty((2, 16 * n + 64), dtype=np.int64)
     n_pairs = 0
-    # Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
-    # a node has moved skin/4 since x_build; `near` (the pairs of it within near_skin of
-    # touching) when gaps could have closed by near_skin since x_near / radius_near.
     x_near = x.copy()
     radius_near = rest_radius.copy()
     near = np.empty((2, pairs.shape[1]), dtype=np.int64)
@@ -638,8 +1025,6 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     contact_energy = 0.0
     residual = np.inf
     kinetic = np.inf
-    held_start_frame = ends.start_frame_held
-    held_end_frame = ends.end_frame_held
     clamp = np.empty((3, 3))
     couple = np.empty(8)
     kinetic_before = 0.0
@@ -672,31 +1057,23 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     steps = 0
 
     # first half drift: positions to t + dt/2
-    for c in range(3):
-        for i in range(n + 1):
-            x[c, i] += 0.5 * dt * v[c, i]
-    rotate_frames(Q, w, 0.5 * dt)
+    _drift(x, v, Q, w, 0.5 * dt)
 
     for step in range(n_steps):
-        t_half = t + 0.5 * dt
-        rot_end = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t_half)
-        rot_start = table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_half)
-        disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t_half)
-        disp_rate = table_slope(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t_half)
-        end_force = table_value(table_t[T_END_FORCE], table_v[T_END_FORCE], table_n[T_END_FORCE], t_half)
-        f_stiff = table_value(table_t[T_STIFFNESS], table_v[T_STIFFNESS], table_n[T_STIFFNESS], t_half)
-        f_radius = table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t_half)
-        local_twist = table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t_half)
-        local_pull = table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t_half)
-        _apply_held(x, v, ends, disp, disp_rate)
+        # controls at the half step, where the positions are
+        u = _controls(tables, t + 0.5 * dt)
+        _apply_held(x, v, ends, u.displacement, u.displacement_rate)
 
-        # Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r (a·κ3⁰ fixed).
+        # loads. Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r
+        # (a·κ3⁰ fixed).
+        f_stiff = u.stiffness
+        f_radius = u.radius
         r2 = f_radius * f_radius
         fb = f_stiff * r2 * r2
         f_radius_inv = 1.0 / f_radius
         internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
-                       f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
+                       f_stiff * r2, fb, r2 * r2, f_radius_inv, u.local_twist,
                        force, torque, dilatation, lengths, energies, work)
         if energies[2] < COS_MAX_TURN:
             # beyond 135° between neighbours the matrix log nears its branch cut at 180°,
@@ -709,35 +1086,19 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         # centres: a bending/twisting spring over that half element (second order at the
         # boundary, and the twist put in spans the whole rest length L0).
         clamp_torque = 0.0
-        if held_start_frame:
-            rotated_frame(start_frame, axis, rot_start, clamp)
-            e0 = dilatation[0]
-            _clamp_couple(clamp, Q[:, :, 0], 0.5 * rest_length[0], rest_curvature[0, 0],
-                          rest_curvature[1, 0], f_radius_inv * rest_curvature[2, 0],
-                          fb * bend_stiffness[0, 0], fb * bend_stiffness[1, 0], fb * bend_stiffness[2, 0],
-                          1.0 / (e0 * e0 * e0) if incompressible else 1.0, couple)
-            for c in range(3):
-                torque[c, 0] += couple[3 + c] - couple[c]
-            energies[1] += couple[6]
+        if ends.start_frame_held:
+            _start_clamp_couple(Q, rod, ends.start_frame, axis, u.start_rotation, dilatation,
+                                f_radius_inv, fb, incompressible, torque, energies, clamp, couple)
             if couple[7] < COS_MAX_TURN:
                 # the clamp spring's log would wrap past 180° and twist the rod the wrong way
                 status = S_CLAMP_LAG
                 info[D_WHERE] = 0
                 info[D_VALUE] = np.arccos(max(couple[7], -1.0))
                 break
-        if held_end_frame:
-            rotated_frame(end_frame, axis, rot_end, clamp)
-            e1 = dilatation[n - 1]
-            _clamp_couple(Q[:, :, n - 1], clamp, 0.5 * rest_length[n - 1], rest_curvature[0, n - 2],
-                          rest_curvature[1, n - 2], f_radius_inv * rest_curvature[2, n - 2],
-                          fb * bend_stiffness[0, n - 2], fb * bend_stiffness[1, n - 2],
-                          fb * bend_stiffness[2, n - 2], 1.0 / (e1 * e1 * e1) if incompressible else 1.0,
-                          couple)
-            for c in range(3):
-                torque[c, n - 1] += couple[c] + couple[3 + c]
-                clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
-                                 + Q[2, c, n - 1] * couple[2]) * axis[c]
-            energies[1] += couple[6]
+        if ends.end_frame_held:
+            clamp_torque = _end_clamp_couple(Q, rod, ends.end_frame, axis, u.end_rotation,
+                                             dilatation, f_radius_inv, fb, incompressible, torque,
+                                             energies, clamp, couple)
             if couple[7] < COS_MAX_TURN:
                 status = S_CLAMP_LAG
                 info[D_WHERE] = n - 1
@@ -745,61 +1106,11 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 break
 
         if contact_on:
-            _radii(rest_radius, dilatation, f_radius, incompressible, radius)
-            moved = 0.0
-            moved_near = 0.0
-            for i in range(n + 1):
-                d0 = x[0, i] - x_build[0, i]
-                d1 = x[1, i] - x_build[1, i]
-                d2 = x[2, i] - x_build[2, i]
-                moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
-                d0 = x[0, i] - x_near[0, i]
-                d1 = x[1, i] - x_near[1, i]
-                d2 = x[2, i] - x_near[2, i]
-                moved_near = max(moved_near, d0 * d0 + d1 * d1 + d2 * d2)
-            grown = 0.0
-            widest = 0.0
-            for i in range(n):
-                grown = max(grown, radius[i] - radius_near[i])
-                widest = max(widest, radius[i])
-            # A pair outside the long list needs its gap to shrink by > skin: midpoints and
-            # half-lengths each move by at most the largest node displacement, so 4·moved.
-            if rebuilds == 0 or 16.0 * moved > skin * skin or widest > radius_cut:
-                longest = 0.0
-                for i in range(n):
-                    longest = max(longest, lengths[i])
-                radius_cut = 1.1 * widest
-                pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
-                if near.shape[1] < pairs.shape[1]:
-                    near = np.empty((2, pairs.shape[1]), dtype=np.int64)
-                x_build[:, :] = x
-                rebuilds += 1
-                max_pairs = max(max_pairs, n_pairs)
-                moved_near = np.inf
-            # A gap changes by at most the two segments' largest node displacements plus the
-            # growth of the two radii (closest_parameters' fallback for segments parallel to
-            # 1e-6 rad adds up to 1e-6 of an element length: negligible against near_skin).
-            # With near_skin ≥ skin/2 this never fires between grid builds: the old, one-list
-            # behaviour.
-            if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
-                n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
-                x_near[:, :] = x
-                radius_near[:] = radius
-                near_rebuilds += 1
-            touching, worst, worst_at, contact_energy = add_contact_forces(
-                x, v, radius, near, n_near, contact_k, contact_c, f_stiff, friction, slip_speed,
-                1.0 if incompressible else 0.0, force)
-            # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
-            # strand can pass around such an end, so link leaves only where the scene lets it.
-            for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
-                if (ends.end_body if which == 1 else ends.start_body):
-                    body_touching, body_worst, body_energy = add_body_forces(
-                        x, v, radius, contact_k, contact_c, f_stiff, which * n,
-                        2.0 * which - 1.0, axis, ends.body_radius, exclusion, force)
-                    touching += body_touching
-                    contact_energy += body_energy
-                    if body_worst > worst:
-                        worst, worst_at = body_worst, which * (n - 1)
+            (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
+             touching, worst, worst_at, contact_energy) = _contact_loads(
+                x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
+                x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
+                near_rebuilds, max_pairs, force)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -807,27 +1118,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 info[D_WHERE] = worst_at
                 info[D_VALUE] = worst
                 break
-
-        # external loads
-        for c in range(3):
-            force[c, n] += end_force * force_dir[c]
-        if gravity[0] != 0.0 or gravity[1] != 0.0 or gravity[2] != 0.0:
-            for c in range(3):
-                for i in range(n + 1):
-                    force[c, i] += node_mass[i] * r2 * gravity[c]
-        if local_pull != 0.0 and seg_last > seg_first:
-            d0 = x[0, seg_last] - x[0, seg_first]
-            d1 = x[1, seg_last] - x[1, seg_first]
-            d2 = x[2, seg_last] - x[2, seg_first]
-            dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            if dn > 0.0:
-                p = local_pull / dn
-                force[0, seg_first] += p * d0
-                force[1, seg_first] += p * d1
-                force[2, seg_first] += p * d2
-                force[0, seg_last] -= p * d0
-                force[1, seg_last] -= p * d1
-                force[2, seg_last] -= p * d2
+        _external_loads(x, node_mass, r2, u.end_force, force_dir, gravity, u.local_pull,
+                        seg_first, seg_last, force)
 
         t_next = t + dt
         last = step == n_steps - 1
@@ -836,165 +1128,35 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         if record:
             # kinetic energy at t (before the kick); averaged with the one after it, it sits at
             # t + dt/2 with the potential energy, so the recorded total is second-order accurate
-            kinetic_before = 0.0
-            for i in range(n + 1):
-                kinetic_before += 0.5 * node_mass[i] * r2 * (v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
-            for i in range(n):
-                for c in range(3):
-                    kinetic_before += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+            kinetic_before = _kinetic_energy(v, w, node_mass, inertia, r2)
 
-        # kick
-        for c in range(3):
-            for i in range(n + 1):
-                v[c, i] = v[c, i] * decay + gain * dt * force[c, i] * inv_mass[i] / r2
-        for c in range(3):
-            for i in range(n):
-                gi = dilatation[i] if incompressible else 1.0
-                w[c, i] = (w[c, i] * decay_rotation[c]
-                           + gain_rotation[c] * dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2))
-        if quadratic_drag > 0.0:
-            # Drag growing with speed (implicit, so stable at any speed): quasi-static motion
-            # barely feels it, but a snap-through cannot turn stored twist into speeds that
-            # no contact spring can stop. Equilibria do not depend on it.
-            for i in range(n + 1):
-                speed = np.sqrt(v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
-                f = 1.0 / (1.0 + quadratic_drag * speed * dt)
-                v[0, i] *= f
-                v[1, i] *= f
-                v[2, i] *= f
-            for i in range(n):
-                spin = drag_radius * np.sqrt(w[0, i] ** 2 + w[1, i] ** 2 + w[2, i] ** 2)
-                f = 1.0 / (1.0 + quadratic_drag * spin * dt)
-                w[0, i] *= f
-                w[1, i] *= f
-                w[2, i] *= f
-        _hold_velocities(v, ends, disp_rate)
+        _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
+              decay_rotation, gain_rotation, incompressible, quadratic_drag, drag_radius)
+        _hold_velocities(v, ends, u.displacement_rate)
 
         if check or record:
-            # Residual: largest nodal force and element torque / length on free degrees of freedom.
-            res = 0.0
-            kin = 0.0
-            for i in range(n + 1):
-                fm = 0.0
-                vv = 0.0
-                for c in range(3):
-                    held = (i == 0 and ends.start_held[c] != 0) or (i == n and ends.end_held[c] != 0)
-                    if not held:
-                        fm += force[c, i] * force[c, i]
-                    vv += v[c, i] * v[c, i]
-                res = max(res, np.sqrt(fm))
-                kin += 0.5 * node_mass[i] * r2 * vv
-                if not np.isfinite(vv) or not np.isfinite(fm):
-                    status = S_NAN
-                    info[D_WHERE] = i
-                    info[D_VALUE] = vv
-                    break
-                if vv > speed_limit * speed_limit:
-                    status = S_SPEED
-                    info[D_WHERE] = i
-                    info[D_VALUE] = np.sqrt(vv)
-                    break
+            status, res, kin = _guards(v, w, force, torque, ends, node_mass, inertia, rest_length,
+                                       r2, speed_limit, info)
             if status != S_COMPLETED:
-                break
-            for i in range(n):
-                tm = 0.0
-                for c in range(3):
-                    tm += torque[c, i] * torque[c, i]
-                    kin += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
-                res = max(res, np.sqrt(tm) / rest_length[i])
-            if not np.isfinite(kin) or not np.isfinite(res):
-                status = S_NAN
-                info[D_WHERE] = -1
-                info[D_VALUE] = kin
                 break
             residual = res / force_scale
             kinetic = kin / (force_scale * length_scale)
             if record:
-                # positions are at t + dt/2; bring the recorded ones to t + dt
-                for c in range(3):
-                    for i in range(n + 1):
-                        snap_x[rows, c, i] = x[c, i] + 0.5 * dt * v[c, i]
-                Qs = Q.copy()
-                rotate_frames(Qs, w, 0.5 * dt)
-                for c in range(3):
-                    for i in range(n):
-                        snap_d1[rows, c, i] = Qs[0, c, i]
-                # axial force the outside exerts on node n: minus the rod's force on it
-                rod_on_end = 0.0
-                for c in range(3):
-                    rod_on_end += (force[c, n] - end_force * force_dir[c]) * axis[c]
-                end_disp = 0.0
-                for c in range(3):
-                    end_disp += (snap_x[rows, c, n] - end_position[c]) * axis[c]
-                history[rows, H_TIME] = t_next
-                history[rows, H_END_ROTATION] = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION],
-                                                            table_n[T_END_ROTATION], t_next)
-                history[rows, H_END_FORCE] = -rod_on_end
-                history[rows, H_END_TORQUE] = clamp_torque
-                history[rows, H_END_DISPLACEMENT] = end_disp
-                history[rows, H_APPLIED_FORCE] = end_force
-                history[rows, H_STRETCH_ENERGY] = energies[0]
-                history[rows, H_BEND_ENERGY] = energies[1]
-                history[rows, H_KINETIC_ENERGY] = 0.5 * (kin + kinetic_before)
-                history[rows, H_CONTACTS] = touching
-                history[rows, H_PENETRATION] = worst
-                history[rows, H_RESIDUAL] = residual
-                history[rows, H_STIFFNESS] = f_stiff
-                history[rows, H_RADIUS_FACTOR] = f_radius
-                history[rows, H_CONTACT_ENERGY] = contact_energy
-                history[rows, H_START_ROTATION] = table_value(
-                    table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_next)
+                _record(rows, x, v, Q, w, force, dt, t_next, u.end_force, force_dir, axis,
+                        end_position, tables, clamp_torque, energies, 0.5 * (kin + kinetic_before),
+                        touching, worst, residual, f_stiff, f_radius, contact_energy, out)
                 rows += 1
 
         # drift: a full step, or half a step to land on t + dt at the end
-        h = 0.5 * dt if last else dt
-        for c in range(3):
-            for i in range(n + 1):
-                x[c, i] += h * v[c, i]
-        rotate_frames(Q, w, h)
+        _drift(x, v, Q, w, 0.5 * dt if last else dt)
         t = t_next
         steps = step + 1
 
         if settle_on and check:
-            if t < equilibrium_after:
-                window_start = t  # controls still moving: windows start when they stop
-            else:
-                for c in range(3):
-                    for i in range(n + 1):
-                        window_sum[c, i] += x[c, i]
-                        window_squares[c, i] += x[c, i] * x[c, i]
-                    for i in range(n):
-                        surface = drag_radius * Q[0, c, i]
-                        window_sum[3 + c, i] += surface
-                        window_squares[3 + c, i] += surface * surface
-                window_count += 1
-                if t - window_start >= settle_window:
-                    motion = 0.0
-                    spread = 0.0
-                    for i in range(n + 1):
-                        dx = 0.0
-                        dd = 0.0
-                        vx = 0.0
-                        vd = 0.0
-                        for c in range(3):
-                            mean = window_sum[c, i] / window_count
-                            dx += (mean - window_mean[c, i]) ** 2
-                            vx += window_squares[c, i] / window_count - mean * mean
-                            window_mean[c, i] = mean
-                            mean = window_sum[3 + c, i] / window_count
-                            dd += (mean - window_mean[3 + c, i]) ** 2
-                            vd += window_squares[3 + c, i] / window_count - mean * mean
-                            window_mean[3 + c, i] = mean
-                        motion = max(motion, np.sqrt(dx) + np.sqrt(dd))
-                        spread = max(spread, np.sqrt(max(vx, 0.0)) + np.sqrt(max(vd, 0.0)))
-                    if have_mean:
-                        settle_motion = max(motion, spread)
-                        settled = settle_motion < settle_distance
-                    have_mean = True
-                    window_sum[:, :] = 0.0
-                    window_squares[:, :] = 0.0
-                    window_count = 0
-                    window_start = t
+            window_count, window_start, have_mean, settle_motion, settled = _settle_windows(
+                x, Q, t, drag_radius, settle_window, settle_distance, equilibrium_after,
+                window_sum, window_squares, window_mean, window_count, window_start, have_mean,
+                settle_motion, settled)
 
         accept = False
         if check and stop_at_equilibrium and t >= equilibrium_after:
@@ -1006,16 +1168,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                     # how much of the probe is left (its projection on the probe shape; an
                     # error of the candidate along other directions, e.g. the axial stretch
                     # still settling to the tolerance, does not count) and how far the rod went
-                    away = 0.0
-                    along = 0.0
-                    for i in range(n + 1):
-                        d0 = x[0, i] - probe_reference[0, i]
-                        d1 = x[1, i] - probe_reference[1, i]
-                        d2 = x[2, i] - probe_reference[2, i]
-                        away = max(away, d0 * d0 + d1 * d1 + d2 * d2)
-                        along += d0 * probe_shape[0, i] + d1 * probe_shape[1, i] + d2 * probe_shape[2, i]
-                    away = np.sqrt(away)
-                    along = abs(along) / (probe_size * probe_norm2)
+                    away, along = _probe_distance(x, probe_reference, probe_shape, probe_size,
+                                                  probe_norm2)
                     leave = settings.probe_leave
                     if away > leave * probe_size or along > leave:
                         probe_running = False
@@ -1025,10 +1179,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 elif at_rest and touching > 0:
                     accept = True  # held by contact: see the note on the probe above
                 elif at_rest:
-                    probe_reference[:, :] = x
-                    for c in range(3):
-                        for i in range(n + 1):
-                            x[c, i] += probe_size * probe_shape[c, i]
+                    _start_probe(x, probe_reference, probe_shape, probe_size)
                     probe_running = True
                     probes += 1
                     # the shape test starts afresh: the windows before the probe say nothing
@@ -1043,10 +1194,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             info[D_SETTLED] = 0.0 if residual < tolerance and kinetic < tolerance * tolerance else 1.0
             if not last:
                 # undo the extra half step so the state is at time t
-                for c in range(3):
-                    for i in range(n + 1):
-                        x[c, i] -= 0.5 * dt * v[c, i]
-                rotate_frames(Q, w, -0.5 * dt)
+                _drift(x, v, Q, w, -0.5 * dt)
             break
 
     if status == S_COMPLETED or status == S_EQUILIBRIUM:

@@ -16,6 +16,7 @@ from ..result import HISTORY_COLUMNS, RunResult, rotation_put_in
 from . import kernel as k
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
+
 def _table_arrays(tables: list[Table], shift: float):
     width = max(len(t[0]) for t in tables)
     times = np.zeros((len(tables), width))
