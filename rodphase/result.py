@@ -8,25 +8,28 @@ import numpy as np
 
 STATUSES = ("ok", "unstable", "not_converged")
 
-# history columns, in the order the kernel writes them (see rod/kernel.py H_*)
-HISTORY_COLUMNS = (
-    "time",  # s
-    "end_rotation",  # rad, the end rotation control
-    "end_force",  # N, axial force the outside exerts on the end node (load or reaction)
-    "end_torque",  # N m, axial torque the outside exerts on the end element
-    "end_displacement",  # m, end node along the axis from its initial place
-    "applied_force",  # N, the end-force control
-    "stretch_energy",  # J
-    "bend_energy",  # J
-    "kinetic_energy",  # J
-    "contacts",  # touching element pairs
-    "penetration",  # largest overlap / radius
-    "residual",  # largest free nodal force / force scale
-    "stiffness_factor",
-    "radius_factor",
-    "contact_energy",  # J, penalty springs (rod on rod and rod on the end bodies)
-    "start_rotation",  # rad, the start rotation control
+# The history: one row per sampled time, one column per quantity, in the order the kernel
+# writes them (rod/kernel.py derives its slot indices H_* from this table). (name, unit, meaning)
+HISTORY = (
+    ("time", "s", "time at the row"),
+    ("end_rotation", "rad", "the end rotation control"),
+    ("end_force", "N", "axial force the outside exerts on the end node (load or reaction)"),
+    ("end_torque", "N m", "axial torque the outside exerts on the end element"),
+    ("end_displacement", "m", "end node along the axis from its initial place"),
+    ("applied_force", "N", "the end-force control"),
+    ("stretch_energy", "J", "stretch and shear energy"),
+    ("bend_energy", "J", "bend and twist energy (with the clamp springs)"),
+    ("kinetic_energy", "J", "kinetic energy, at the time of the potential energies"),
+    ("contacts", "1", "touching element pairs"),
+    ("penetration", "1", "largest overlap / radius"),
+    ("residual", "1", "largest free nodal force / force scale"),
+    ("stiffness_factor", "1", "the modulus ramp's factor on E and G"),
+    ("radius_factor", "1", "the growth factor on the radius"),
+    ("contact_energy", "J", "penalty springs (rod on rod and rod on the end bodies)"),
+    ("start_rotation", "rad", "the start rotation control"),
 )
+HISTORY_COLUMNS = tuple(name for name, _, _ in HISTORY)
+HISTORY_UNITS = {name: unit for name, unit, _ in HISTORY}
 
 
 def rotation_put_in(history: dict) -> np.ndarray:

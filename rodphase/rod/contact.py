@@ -21,7 +21,7 @@ def _cell_hash(ix, iy, iz, mask):
     return ((ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791)) & mask
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def build_pairs(x, exclusion, cutoff, pairs):
     """Candidate element pairs (i, j), j > i + exclusion, with midpoint distance < cutoff.
 
@@ -119,7 +119,7 @@ def closest_parameters(r0, r1, r2, u0, u1, u2, w0, w1, w2, inv_uu, inv_ww):
     return s, t
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def near_pairs(x, radius, pairs, n_pairs, margin, near):
     """The listed pairs whose capsules are less than `margin` apart (gap = distance − r_i − r_j).
 
@@ -176,7 +176,7 @@ def near_pairs(x, radius, pairs, n_pairs, margin, near):
     return count
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction,
                        slip_speed, thinning, force):
     """Add penalty contact forces of the listed pairs to `force` (3, n+1).
@@ -289,7 +289,7 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     return touching, worst, worst_element, energy
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def add_body_forces(x, v, radius, stiffness, damping, scale, end, side, axis, body_radius,
                     exclusion, force):
     """Contact of the rod with the rigid body that a held end is fixed to.

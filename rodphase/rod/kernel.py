@@ -19,62 +19,105 @@ scalar settings are packed in `ints` and `floats` (I_* and F_* indices). The int
 position Verlet with the two half drifts merged, so positions live at half steps inside the
 loop; damping multiplies velocities by exp(-ν·dt), which is stable for any ν ≥ 0, and is
 applied before the boundary conditions so that prescribed motions are exact.
+
+Every function advance calls is inlined into it (inline="always", at numba's IR level), so
+that its machine code exists once. A callee compiled on its own is linked into advance as a
+linkonce_odr copy that LLVM optimises again with advance; a process that compiles advance
+then binds the call to the callee's own copy, one that loads advance from numba's disk cache
+to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m on the
+reference scenes, tests/test_kernel_cache.py).
 """
+
+from collections import namedtuple
 
 import numpy as np
 
+from ..result import HISTORY_COLUMNS
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
 from .contact import add_body_forces, add_contact_forces, build_pairs, near_pairs
 
-# integer settings
-I_INCOMPRESSIBLE = 0
-I_CONTACT = 1
-I_EXCLUSION = 2
-I_START_HELD = 3  # 3 entries: x, y, z of node 0 held
-I_START_FRAME_HELD = 6
-I_END_HELD = 7  # 3 entries: x, y, z of node n held
-I_END_FRAME_HELD = 10
-I_SEGMENT_FIRST = 11  # first and last node of the active-agent segment
-I_SEGMENT_LAST = 12
-I_HISTORY_EVERY = 13
-I_CHECK_EVERY = 14
-I_STOP_AT_EQUILIBRIUM = 15
-I_START_BODY = 16  # 1: a rigid rod beyond node 0, along -axis, takes part in contact
-I_END_BODY = 17  # 1: a rigid rod beyond node n, along +axis (the loading rod); = I_START_BODY + 1
-I_PROBE = 18  # 1: an equilibrium ends the hold only if it survives a perturbation (stable)
-N_INTS = 19
+# The kernel's inputs, by name. numba compiles a namedtuple of arrays and scalars into a
+# plain struct (no Python per step) and caches functions taking them; simulate.py fills the
+# fields by name. The field types must not vary between calls (each new combination of
+# types is a new compile): simulate.py casts every scalar (bool, int, float).
 
-# float settings
-F_DT = 0
-F_DAMPING = 1  # 1/s, translational
-F_DAMPING_ROTATION = 2  # 1/s, rotational, about d1 and d2 (half of it about d3)
-F_FRICTION = 3
-F_SLIP_SPEED = 4
-F_SKIN = 5
-F_PENETRATION_LIMIT = 6  # overlap / radius that counts as a failed contact
-F_SPEED_LIMIT = 7  # m/s; faster than this is a blow-up
-F_TOLERANCE = 8
-F_FORCE_SCALE = 9
-F_LENGTH_SCALE = 10
-F_AXIS = 11  # 3 entries: unit rod axis (lab), direction of end rotation and displacement
-F_FORCE_DIRECTION = 14  # 3 entries: unit direction of the end force
-F_GRAVITY = 17  # 3 entries, m/s²
-F_EQUILIBRIUM_AFTER = 20  # no equilibrium stop before this time (controls still moving)
-F_QUADRATIC_DRAG = 21  # 1/m: extra drag rate per unit speed (speed × this, in 1/s)
-F_DRAG_RADIUS = 22  # m: lever that turns spin into a surface speed for the quadratic drag
-F_SETTLE_WINDOW = 23  # s: window over which the mean shape is compared (0: residual test only)
-F_SETTLE_DISTANCE = 24  # m: the mean shape settled if no surface point moved more than this
-F_NEAR_SKIN = 25  # m: gap below which a candidate pair enters the short (near) contact list
-F_BODY_RADIUS = 26  # m: radius of the end bodies (I_START_BODY, I_END_BODY)
-F_PROBE_SIZE = 27  # m: largest node displacement of the stability probe
-F_PROBE_RETURN = 28  # stable once the probe's component along its shape has decayed below this fraction
-F_PROBE_LEAVE = 29  # unstable once that component, or any node's distance, grows past this many probes
-N_FLOATS = 30
+# rest properties of the rod (see model.py and simulate._rod_arrays for how they are built)
+RodProperties = namedtuple("RodProperties", [
+    "rest_length",  # (n,) m
+    "rest_voronoi",  # (n-1,) m
+    "node_mass",  # (n+1,) kg
+    "inertia",  # (3, n) ρ·l0·diag(I1, I2, I3), kg m
+    "shear_stiffness",  # (3, n) diag(4GA/3, 4GA/3, EA), N
+    "bend_stiffness",  # (3, n-1) diag(EI1, EI2, GI3) at the Voronoi domains, N m²
+    "rest_curvature",  # (3, n-1) 1/m; [2] is the rest twist
+    "rest_shear",  # (3, n)
+    "rest_radius",  # (n,) m
+    "contact_k",  # (n,) N/m per element
+    "contact_c",  # (n,) N s/m per element
+    "local_mask",  # (n-1,) 1.0 on the Voronoi domains of the "active agent" segment
+])
+
+# how the ends are held: what the boundary conditions read
+Boundary = namedtuple("Boundary", [
+    "start_held",  # (3,) int64: 1 where x, y, z of node 0 are held
+    "start_frame_held",  # bool: element 0's frame is clamped
+    "end_held",  # (3,) int64: 1 where x, y, z of node n are held
+    "end_frame_held",  # bool: element n-1's frame is clamped
+    "start_position",  # (3,) m, where node 0's held components are held
+    "end_position",  # (3,) m, node n's, before the end displacement control
+    "start_frame",  # (3, 3) the start clamp's frame (rows d1 d2 d3) before its rotation
+    "end_frame",  # (3, 3) the end clamp's
+    "axis",  # (3,) unit rod axis (lab): direction of end rotation and displacement
+    "force_direction",  # (3,) unit direction of the end force
+    "start_body",  # bool: a rigid rod beyond node 0, along -axis, takes part in contact
+    "end_body",  # bool: a rigid rod beyond node n, along +axis (the loading rod)
+    "body_radius",  # m, radius of the end bodies
+    "segment_first",  # int: first node of the active-agent segment
+    "segment_last",  # int: last node of it
+    "gravity",  # (3,) m/s²
+])
+
+# the integrator, contact and the guards
+Settings = namedtuple("Settings", [
+    "dt",  # s
+    "incompressible",  # bool: A·e constant, radius a0/√e; the 1/e and 1/e³ factors
+    "damping",  # 1/s, translational
+    "damping_rotation",  # 1/s, rotational, about d1 and d2 (half of it about d3)
+    "quadratic_drag",  # 1/m: extra drag rate per unit speed (speed × this, in 1/s)
+    "drag_radius",  # m: lever that turns spin into a surface speed for the quadratic drag
+    "contact",  # bool: self-contact on
+    "exclusion",  # int: elements closer than this along the rod never touch
+    "friction",  # Coulomb coefficient
+    "slip_speed",  # m/s, below it friction is viscous
+    "skin",  # m: Verlet-list margin of the candidate pairs
+    "near_skin",  # m: gap below which a candidate pair enters the short (near) contact list
+    "penetration_limit",  # overlap / radius that counts as a failed contact
+    "speed_limit",  # m/s; faster than this is a blow-up
+    "history_every",  # int: steps between history rows
+    "check_every",  # int: steps between guard and equilibrium checks
+    "stop_at_equilibrium",  # bool
+    "equilibrium_after",  # s: no equilibrium stop before this time (controls still moving)
+    "tolerance",  # residual force / force scale, and (squared) kinetic energy / (force scale × L0)
+    "force_scale",  # N
+    "length_scale",  # m
+    "settle_window",  # s: window over which the mean shape is compared (0: residual test only)
+    "settle_distance",  # m: the mean shape settled if no surface point moved more than this
+    "probe",  # bool: an equilibrium ends the hold only if it survives a perturbation (stable)
+    "probe_size",  # m: largest node displacement of the stability probe
+    "probe_return",  # stable once the probe's component along its shape decayed below this fraction
+    "probe_leave",  # unstable once that component, or any node's distance, grows past this many probes
+])
+
+# control tables: piecewise linear in time, row T_* of times (rows, width), values, counts (rows,)
+ControlTables = namedtuple("ControlTables", ["times", "values", "counts"])
+
+# what advance writes: history (H, N_HISTORY), snap_x (H, 3, n+1), snap_d1 (H, 3, n), info (N_INFO,)
+Output = namedtuple("Output", ["history", "snap_x", "snap_d1", "info"])
 
 # control tables
 T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
-T_END_FORCE = 1  # N, along F_FORCE_DIRECTION, on node n
+T_END_FORCE = 1  # N, along the force direction, on node n
 T_END_DISPLACEMENT = 2  # m, along the axis, of the held components of node n
 T_STIFFNESS = 3  # factor on E and G (modulus ramp)
 T_RADIUS = 4  # factor on the radius (growth); rest twist follows as 1/factor
@@ -83,30 +126,30 @@ T_LOCAL_PULL = 6  # N pulling the two ends of the active segment together
 T_START_ROTATION = 7  # rad, about the axis, of the start frame (element 0)
 N_TABLES = 8
 
-# history columns
-H_TIME = 0
-H_END_ROTATION = 1  # rad
-H_END_FORCE = 2  # N, axial force the outside exerts on node n (load or reaction)
-H_END_TORQUE = 3  # N m, axial torque the outside exerts on the end element
-H_END_DISPLACEMENT = 4  # m, of node n along the axis from its reference
-H_APPLIED_FORCE = 5  # N, the end-force control at this time
-H_STRETCH_ENERGY = 6
-H_BEND_ENERGY = 7
-H_KINETIC_ENERGY = 8
-H_CONTACTS = 9
-H_PENETRATION = 10  # largest overlap / radius
-H_RESIDUAL = 11  # largest free nodal force / force scale
-H_STIFFNESS = 12
-H_RADIUS_FACTOR = 13
-H_CONTACT_ENERGY = 14
-H_START_ROTATION = 15  # rad, the start rotation control
-N_HISTORY = 16
+# history slots, from the one table of columns (name, unit, meaning) in result.py
+H_TIME = HISTORY_COLUMNS.index("time")
+H_END_ROTATION = HISTORY_COLUMNS.index("end_rotation")
+H_END_FORCE = HISTORY_COLUMNS.index("end_force")
+H_END_TORQUE = HISTORY_COLUMNS.index("end_torque")
+H_END_DISPLACEMENT = HISTORY_COLUMNS.index("end_displacement")
+H_APPLIED_FORCE = HISTORY_COLUMNS.index("applied_force")
+H_STRETCH_ENERGY = HISTORY_COLUMNS.index("stretch_energy")
+H_BEND_ENERGY = HISTORY_COLUMNS.index("bend_energy")
+H_KINETIC_ENERGY = HISTORY_COLUMNS.index("kinetic_energy")
+H_CONTACTS = HISTORY_COLUMNS.index("contacts")
+H_PENETRATION = HISTORY_COLUMNS.index("penetration")
+H_RESIDUAL = HISTORY_COLUMNS.index("residual")
+H_STIFFNESS = HISTORY_COLUMNS.index("stiffness_factor")
+H_RADIUS_FACTOR = HISTORY_COLUMNS.index("radius_factor")
+H_CONTACT_ENERGY = HISTORY_COLUMNS.index("contact_energy")
+H_START_ROTATION = HISTORY_COLUMNS.index("start_rotation")
+N_HISTORY = len(HISTORY_COLUMNS)
 
 # cos 135°: neighbouring frames (and an end frame and its clamp) turned further apart than
 # this bring the matrix log near its branch cut at 180°, where twist would silently wrap
 COS_MAX_TURN = -0.7071
 
-# status codes
+# status codes advance returns
 S_COMPLETED = 0
 S_EQUILIBRIUM = 1
 S_NAN = 2
@@ -114,6 +157,24 @@ S_SPEED = 3
 S_PENETRATION = 4
 S_RESOLUTION = 5  # neighbouring frames turned by more than 135°: the rod is under-resolved
 S_CLAMP_LAG = 6  # an end frame lags its turning clamp by more than 135°: twisted too fast
+
+# The guards, one row each (as diffrax's RESULTS): the short name for diagnostics["guard"]
+# (what a caller may act on), what tripped, where info[D_WHERE] points, and what to change.
+Guard = namedtuple("Guard", ["name", "message", "where", "advice"])
+_STEP_ADVICE = ("Try a smaller solver.dt or solver.safety, more solver.damping, or a stiffer "
+                "contact.stiffness.")
+GUARDS = {
+    S_NAN: Guard("non_finite", "non-finite state (NaN or inf)", "node", _STEP_ADVICE),
+    S_SPEED: Guard("speed", "runaway velocity", "node", _STEP_ADVICE),
+    S_PENETRATION: Guard("penetration", "contact penetration", "element", _STEP_ADVICE),
+    S_RESOLUTION: Guard("resolution",
+                        "under-resolved rod (neighbouring frames turned by more than 135°)",
+                        "Voronoi domain",
+                        "Use more rod.elements (twist per element = Φa·L0/(a·n) rad)."),
+    S_CLAMP_LAG: Guard("clamp_lag", "end frame lagging its turning clamp by more than 135°",
+                       "element", "The twist is put in faster than it spreads along the rod: "
+                       "lower loading.twist_rate (turns/s)."),
+}
 
 # info entries
 D_WHERE = 0  # node or element index where a guard tripped
@@ -160,7 +221,7 @@ def table_slope(times, values, count, t):
     return (values[lo + 1] - values[lo]) / (times[lo + 1] - times[lo])
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def rotate_frames(Q, w, scale):
     """Q_i ← exp(−scale·[w_i]×)·Q_i: a body rotation by angle scale·|w_i| about w_i (material)."""
     n = Q.shape[2]
@@ -238,7 +299,7 @@ def _row_dot(A, i, B, j):
     return A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result):
     """Couple of a clamp spring between frames A and B (rows d1 d2 d3) over half an element.
 
@@ -271,7 +332,7 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
 N_WORK = 13  # rows of the scratch array internal_loads needs, each of length n
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                    bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                    f_shear, f_bend, f_inertia, f_twist, local_twist,
@@ -294,7 +355,8 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
     c0, c1, c2 = work[9], work[10], work[11]  # couple / ε³ per Voronoi domain
     density = work[12]
 
-    # elements: stretch and shear, their couple, and the rigid-body rotation terms
+    # elements: the internal force n = S(σ − σ0) of stretch and shear, the shear couple,
+    # and the rigid-body rotation terms (Lagrangian transport, unsteady dilatation)
     for i in range(n):
         t0 = x[0, i + 1] - x[0, i]
         t1 = x[1, i + 1] - x[1, i]
@@ -395,7 +457,8 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         ka0[j] = k0
         ka1[j] = k1
         ka2[j] = k2
-    # elements: the difference of the couples, plus κ × τ·D0/ε³ split between both sides
+    # elements: the bend-twist couple, the difference of the Voronoi couples B(κ − κ0)/ε³,
+    # plus κ × τ·D0/ε³ split between both sides
     # (with the full curvature κ, not κ − κ0)
     for i in range(n):
         acc0 = 0.0
@@ -419,7 +482,7 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
     energies[1] = bend_energy
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
     for i in range(rest_radius.shape[0]):
         if incompressible:
@@ -428,20 +491,20 @@ def _radii(rest_radius, dilatation, f_radius, incompressible, radius):
             radius[i] = f_radius * rest_radius[i]
 
 
-@njit(cache=True)
-def _apply_held(x, v, ints, floats, start_position, end_position, displacement, displacement_rate):
+@njit(cache=True, inline="always")
+def _apply_held(x, v, ends, displacement, displacement_rate):
     """Overwrite held node positions and velocities: prescribed motions are exact."""
     n = x.shape[1] - 1
     for c in range(3):
-        if ints[I_START_HELD + c]:
-            x[c, 0] = start_position[c]
+        if ends.start_held[c]:
+            x[c, 0] = ends.start_position[c]
             v[c, 0] = 0.0
-        if ints[I_END_HELD + c]:
-            x[c, n] = end_position[c] + displacement * floats[F_AXIS + c]
-            v[c, n] = displacement_rate * floats[F_AXIS + c]
+        if ends.end_held[c]:
+            x[c, n] = ends.end_position[c] + displacement * ends.axis[c]
+            v[c, n] = displacement_rate * ends.axis[c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _drag_factors(nu_dt):
     """(e^{−x}, (1 − e^{−x})/x) for x = ν·dt, with the series near 0."""
     if nu_dt < 1e-6:
@@ -450,68 +513,474 @@ def _drag_factors(nu_dt):
     return decay, (1.0 - decay) / nu_dt
 
 
-@njit(cache=True)
-def _hold_velocities(v, ints, floats, displacement_rate):
+@njit(cache=True, inline="always")
+def _hold_velocities(v, ends, displacement_rate):
     n = v.shape[1] - 1
     for c in range(3):
-        if ints[I_START_HELD + c]:
+        if ends.start_held[c]:
             v[c, 0] = 0.0
-        if ints[I_END_HELD + c]:
-            v[c, n] = displacement_rate * floats[F_AXIS + c]
+        if ends.end_held[c]:
+            v[c, n] = displacement_rate * ends.axis[c]
+
+
+# The pieces of one step, in the order advance composes them: controls -> loads (internal,
+# clamps, contact, external) -> kick -> guards -> record -> drift -> settle/equilibrium.
+# Each is inlined into advance (see the module docstring); a piece that can trip a guard
+# returns the status code and advance stops on anything but S_COMPLETED.
+
+ControlValues = namedtuple("ControlValues", [
+    "end_rotation", "start_rotation", "displacement", "displacement_rate", "end_force",
+    "stiffness", "radius", "local_twist", "local_pull"])
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _controls(tables, t):
+    """The controls at time t (positions live at half steps: advance passes t + dt/2)."""
+    table_t = tables.times
+    table_v = tables.values
+    table_n = tables.counts
+    return ControlValues(
+        table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t),
+        table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t),
+        table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t),
+        table_slope(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t),
+        table_value(table_t[T_END_FORCE], table_v[T_END_FORCE], table_n[T_END_FORCE], t),
+        table_value(table_t[T_STIFFNESS], table_v[T_STIFFNESS], table_n[T_STIFFNESS], t),
+        table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t),
+        table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t),
+        table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t))
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _start_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, fb,
+                        incompressible, torque, energies, clamp, couple):
+    """Bend-twist couple of the start clamp's spring on element 0; couple[7] is the cosine of
+    the angle between the clamp and the element's frame (the clamp-lag guard)."""
+    rest_length = rod.rest_length
+    rest_curvature = rod.rest_curvature
+    bend_stiffness = rod.bend_stiffness
+    rotated_frame(frame, axis, rotation, clamp)
+    e0 = dilatation[0]
+    _clamp_couple(clamp, Q[:, :, 0], 0.5 * rest_length[0], rest_curvature[0, 0],
+                  rest_curvature[1, 0], f_radius_inv * rest_curvature[2, 0],
+                  fb * bend_stiffness[0, 0], fb * bend_stiffness[1, 0], fb * bend_stiffness[2, 0],
+                  1.0 / (e0 * e0 * e0) if incompressible else 1.0, couple)
+    for c in range(3):
+        torque[c, 0] += couple[3 + c] - couple[c]
+    energies[1] += couple[6]
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, fb,
+                      incompressible, torque, energies, clamp, couple):
+    """Bend-twist couple of the end clamp's spring on element n-1; returns the axial torque
+    the clamp exerts on it. couple[7] as for the start clamp."""
+    n = rod.rest_length.shape[0]
+    rest_length = rod.rest_length
+    rest_curvature = rod.rest_curvature
+    bend_stiffness = rod.bend_stiffness
+    clamp_torque = 0.0
+    rotated_frame(frame, axis, rotation, clamp)
+    e1 = dilatation[n - 1]
+    _clamp_couple(Q[:, :, n - 1], clamp, 0.5 * rest_length[n - 1], rest_curvature[0, n - 2],
+                  rest_curvature[1, n - 2], f_radius_inv * rest_curvature[2, n - 2],
+                  fb * bend_stiffness[0, n - 2], fb * bend_stiffness[1, n - 2],
+                  fb * bend_stiffness[2, n - 2], 1.0 / (e1 * e1 * e1) if incompressible else 1.0,
+                  couple)
+    for c in range(3):
+        torque[c, n - 1] += couple[c] + couple[3 + c]
+        clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
+                         + Q[2, c, n - 1] * couple[2]) * axis[c]
+    energies[1] += couple[6]
+    return clamp_torque
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
+                   radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
+                   radius_cut, rebuilds, near_rebuilds, max_pairs, force):
+    """Self-contact and contact with the end bodies: penalty forces added to `force`.
+
+    Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
+    a node has moved skin/4 since x_build; `near` (the pairs of it within near_skin of
+    touching) when gaps could have closed by near_skin since x_near / radius_near.
+    Returns the lists and their counters, then (touching pairs, largest overlap / radius,
+    its element, contact energy).
+    """
+    n = lengths.shape[0]
+    incompressible = settings.incompressible
+    exclusion = settings.exclusion
+    skin = settings.skin
+    near_skin = settings.near_skin
+    contact_k = rod.contact_k
+    contact_c = rod.contact_c
+    _radii(rod.rest_radius, dilatation, f_radius, incompressible, radius)
+    moved = 0.0
+    moved_near = 0.0
+    for i in range(n + 1):
+        d0 = x[0, i] - x_build[0, i]
+        d1 = x[1, i] - x_build[1, i]
+        d2 = x[2, i] - x_build[2, i]
+        moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
+        d0 = x[0, i] - x_near[0, i]
+        d1 = x[1, i] - x_near[1, i]
+        d2 = x[2, i] - x_near[2, i]
+        moved_near = max(moved_near, d0 * d0 + d1 * d1 + d2 * d2)
+    grown = 0.0
+    widest = 0.0
+    for i in range(n):
+        grown = max(grown, radius[i] - radius_near[i])
+        widest = max(widest, radius[i])
+    # A pair outside the long list needs its gap to shrink by > skin: midpoints and
+    # half-lengths each move by at most the largest node displacement, so 4·moved.
+    if rebuilds == 0 or 16.0 * moved > skin * skin or widest > radius_cut:
+        longest = 0.0
+        for i in range(n):
+            longest = max(longest, lengths[i])
+        radius_cut = 1.1 * widest
+        pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
+        if near.shape[1] < pairs.shape[1]:
+            near = np.empty((2, pairs.shape[1]), dtype=np.int64)
+        x_build[:, :] = x
+        rebuilds += 1
+        max_pairs = max(max_pairs, n_pairs)
+        moved_near = np.inf
+    # A gap changes by at most the two segments' largest node displacements plus the
+    # growth of the two radii (closest_parameters' fallback for segments parallel to
+    # 1e-6 rad adds up to 1e-6 of an element length: negligible against near_skin).
+    # With near_skin ≥ skin/2 this never fires between grid builds: the old, one-list
+    # behaviour.
+    if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
+        n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
+        x_near[:, :] = x
+        radius_near[:] = radius
+        near_rebuilds += 1
+    touching, worst, worst_at, contact_energy = add_contact_forces(
+        x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
+        settings.slip_speed, 1.0 if incompressible else 0.0, force)
+    # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
+    # strand can pass around such an end, so link leaves only where the scene lets it.
+    for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
+        if (ends.end_body if which == 1 else ends.start_body):
+            body_touching, body_worst, body_energy = add_body_forces(
+                x, v, radius, contact_k, contact_c, f_stiff, which * n,
+                2.0 * which - 1.0, axis, ends.body_radius, exclusion, force)
+            touching += body_touching
+            contact_energy += body_energy
+            if body_worst > worst:
+                worst, worst_at = body_worst, which * (n - 1)
+    return (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
+            touching, worst, worst_at, contact_energy)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _external_loads(x, node_mass, r2, end_force, force_dir, gravity, local_pull, seg_first,
+                    seg_last, force):
+    """End force, gravity and the active agent's pull, added to `force`."""
+    n = x.shape[1] - 1
+    for c in range(3):
+        force[c, n] += end_force * force_dir[c]
+    if gravity[0] != 0.0 or gravity[1] != 0.0 or gravity[2] != 0.0:
+        for c in range(3):
+            for i in range(n + 1):
+                force[c, i] += node_mass[i] * r2 * gravity[c]
+    if local_pull != 0.0 and seg_last > seg_first:
+        d0 = x[0, seg_last] - x[0, seg_first]
+        d1 = x[1, seg_last] - x[1, seg_first]
+        d2 = x[2, seg_last] - x[2, seg_first]
+        dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if dn > 0.0:
+            p = local_pull / dn
+            force[0, seg_first] += p * d0
+            force[1, seg_first] += p * d1
+            force[2, seg_first] += p * d2
+            force[0, seg_last] -= p * d0
+            force[1, seg_last] -= p * d1
+            force[2, seg_last] -= p * d2
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _kinetic_energy(v, w, node_mass, inertia, r2):
+    n = w.shape[1]
+    kinetic = 0.0
+    for i in range(n + 1):
+        kinetic += 0.5 * node_mass[i] * r2 * (v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
+    for i in range(n):
+        for c in range(3):
+            kinetic += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+    return kinetic
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
+          decay_rotation, gain_rotation, incompressible, quadratic_drag, drag_radius):
+    """Velocities from the loads over a step, with the linear drag integrated exactly; the
+    angular momentum balance carries the dilatation factor e of an incompressible rod."""
+    n = w.shape[1]
+    for c in range(3):
+        for i in range(n + 1):
+            v[c, i] = v[c, i] * decay + gain * dt * force[c, i] * inv_mass[i] / r2
+    for c in range(3):
+        for i in range(n):
+            gi = dilatation[i] if incompressible else 1.0
+            w[c, i] = (w[c, i] * decay_rotation[c]
+                       + gain_rotation[c] * dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2))
+    if quadratic_drag > 0.0:
+        # Drag growing with speed (implicit, so stable at any speed): quasi-static motion
+        # barely feels it, but a snap-through cannot turn stored twist into speeds that
+        # no contact spring can stop. Equilibria do not depend on it.
+        for i in range(n + 1):
+            speed = np.sqrt(v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
+            f = 1.0 / (1.0 + quadratic_drag * speed * dt)
+            v[0, i] *= f
+            v[1, i] *= f
+            v[2, i] *= f
+        for i in range(n):
+            spin = drag_radius * np.sqrt(w[0, i] ** 2 + w[1, i] ** 2 + w[2, i] ** 2)
+            f = 1.0 / (1.0 + quadratic_drag * spin * dt)
+            w[0, i] *= f
+            w[1, i] *= f
+            w[2, i] *= f
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _guards(v, w, force, torque, ends, node_mass, inertia, rest_length, r2, speed_limit, info):
+    """Residual (largest nodal force and element torque per length on free degrees of
+    freedom), kinetic energy, and the non-finite and speed guards.
+    Returns (status, residual [N], kinetic energy [J])."""
+    n = w.shape[1]
+    res = 0.0
+    kin = 0.0
+    for i in range(n + 1):
+        fm = 0.0
+        vv = 0.0
+        for c in range(3):
+            held = (i == 0 and ends.start_held[c] != 0) or (i == n and ends.end_held[c] != 0)
+            if not held:
+                fm += force[c, i] * force[c, i]
+            vv += v[c, i] * v[c, i]
+        res = max(res, np.sqrt(fm))
+        kin += 0.5 * node_mass[i] * r2 * vv
+        if not np.isfinite(vv) or not np.isfinite(fm):
+            info[D_WHERE] = i
+            info[D_VALUE] = vv
+            return S_NAN, res, kin
+        if vv > speed_limit * speed_limit:
+            info[D_WHERE] = i
+            info[D_VALUE] = np.sqrt(vv)
+            return S_SPEED, res, kin
+    for i in range(n):
+        tm = 0.0
+        for c in range(3):
+            tm += torque[c, i] * torque[c, i]
+            kin += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+        res = max(res, np.sqrt(tm) / rest_length[i])
+    if not np.isfinite(kin) or not np.isfinite(res):
+        info[D_WHERE] = -1
+        info[D_VALUE] = kin
+        return S_NAN, res, kin
+    return S_COMPLETED, res, kin
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _record(row, x, v, Q, w, force, dt, t_next, end_force, force_dir, axis, end_position,
+            tables, clamp_torque, energies, kinetic, touching, worst, residual, f_stiff,
+            f_radius, contact_energy, out):
+    """One history row and snapshot, at t + dt (positions are at t + dt/2 inside the loop)."""
+    n = x.shape[1] - 1
+    history = out.history
+    snap_x = out.snap_x
+    snap_d1 = out.snap_d1
+    table_t = tables.times
+    table_v = tables.values
+    table_n = tables.counts
+    # positions are at t + dt/2; bring the recorded ones to t + dt
+    for c in range(3):
+        for i in range(n + 1):
+            snap_x[row, c, i] = x[c, i] + 0.5 * dt * v[c, i]
+    Qs = Q.copy()
+    rotate_frames(Qs, w, 0.5 * dt)
+    for c in range(3):
+        for i in range(n):
+            snap_d1[row, c, i] = Qs[0, c, i]
+    # axial force the outside exerts on node n: minus the rod's force on it
+    rod_on_end = 0.0
+    for c in range(3):
+        rod_on_end += (force[c, n] - end_force * force_dir[c]) * axis[c]
+    end_disp = 0.0
+    for c in range(3):
+        end_disp += (snap_x[row, c, n] - end_position[c]) * axis[c]
+    history[row, H_TIME] = t_next
+    history[row, H_END_ROTATION] = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION],
+                                               table_n[T_END_ROTATION], t_next)
+    history[row, H_END_FORCE] = -rod_on_end
+    history[row, H_END_TORQUE] = clamp_torque
+    history[row, H_END_DISPLACEMENT] = end_disp
+    history[row, H_APPLIED_FORCE] = end_force
+    history[row, H_STRETCH_ENERGY] = energies[0]
+    history[row, H_BEND_ENERGY] = energies[1]
+    history[row, H_KINETIC_ENERGY] = kinetic
+    history[row, H_CONTACTS] = touching
+    history[row, H_PENETRATION] = worst
+    history[row, H_RESIDUAL] = residual
+    history[row, H_STIFFNESS] = f_stiff
+    history[row, H_RADIUS_FACTOR] = f_radius
+    history[row, H_CONTACT_ENERGY] = contact_energy
+    history[row, H_START_ROTATION] = table_value(
+        table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_next)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _drift(x, v, Q, w, h):
+    """Positions and frames moved by the velocities over h."""
+    n = w.shape[1]
+    for c in range(3):
+        for i in range(n + 1):
+            x[c, i] += h * v[c, i]
+    rotate_frames(Q, w, h)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equilibrium_after,
+                    window_sum, window_squares, window_mean, window_count, window_start,
+                    have_mean, settle_motion, settled):
+    """Window means of node positions and of d1 (times the radius: a surface point), summed
+    at every check; the shape has settled when two consecutive window means agree and within
+    the window no point strayed from its mean (rms) by more than the same distance.
+    Returns (window_count, window_start, have_mean, settle_motion, settled)."""
+    n = Q.shape[2]
+    if t < equilibrium_after:
+        window_start = t  # controls still moving: windows start when they stop
+        return window_count, window_start, have_mean, settle_motion, settled
+    for c in range(3):
+        for i in range(n + 1):
+            window_sum[c, i] += x[c, i]
+            window_squares[c, i] += x[c, i] * x[c, i]
+        for i in range(n):
+            surface = drag_radius * Q[0, c, i]
+            window_sum[3 + c, i] += surface
+            window_squares[3 + c, i] += surface * surface
+    window_count += 1
+    if t - window_start >= settle_window:
+        motion = 0.0
+        spread = 0.0
+        for i in range(n + 1):
+            dx = 0.0
+            dd = 0.0
+            vx = 0.0
+            vd = 0.0
+            for c in range(3):
+                mean = window_sum[c, i] / window_count
+                dx += (mean - window_mean[c, i]) ** 2
+                vx += window_squares[c, i] / window_count - mean * mean
+                window_mean[c, i] = mean
+                mean = window_sum[3 + c, i] / window_count
+                dd += (mean - window_mean[3 + c, i]) ** 2
+                vd += window_squares[3 + c, i] / window_count - mean * mean
+                window_mean[3 + c, i] = mean
+            motion = max(motion, np.sqrt(dx) + np.sqrt(dd))
+            spread = max(spread, np.sqrt(max(vx, 0.0)) + np.sqrt(max(vd, 0.0)))
+        if have_mean:
+            settle_motion = max(motion, spread)
+            settled = settle_motion < settle_distance
+        have_mean = True
+        window_sum[:, :] = 0.0
+        window_squares[:, :] = 0.0
+        window_count = 0
+        window_start = t
+    return window_count, window_start, have_mean, settle_motion, settled
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _probe_distance(x, probe_reference, probe_shape, probe_size, probe_norm2):
+    """(largest node distance from the probed candidate, the probe's remaining component
+    along its shape as a fraction of the probe)."""
+    n = x.shape[1] - 1
+    away = 0.0
+    along = 0.0
+    for i in range(n + 1):
+        d0 = x[0, i] - probe_reference[0, i]
+        d1 = x[1, i] - probe_reference[1, i]
+        d2 = x[2, i] - probe_reference[2, i]
+        away = max(away, d0 * d0 + d1 * d1 + d2 * d2)
+        along += d0 * probe_shape[0, i] + d1 * probe_shape[1, i] + d2 * probe_shape[2, i]
+    away = np.sqrt(away)
+    along = abs(along) / (probe_size * probe_norm2)
+    return away, along
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _start_probe(x, probe_reference, probe_shape, probe_size):
+    """Displace the candidate equilibrium by probe_size along probe_shape."""
+    n = x.shape[1] - 1
+    probe_reference[:, :] = x
+    for c in range(3):
+        for i in range(n + 1):
+            x[c, i] += probe_size * probe_shape[c, i]
 
 
 @njit(cache=True, fastmath=_FASTMATH)
-def advance(x, v, Q, w, t_start, n_steps,
-            rest_length, rest_voronoi, node_mass, inertia, shear_stiffness, bend_stiffness,
-            rest_curvature, rest_shear, rest_radius, contact_k, contact_c, local_mask,
-            probe_shape, ints, floats, start_position, end_position, start_frame, end_frame,
-            table_t, table_v, table_n,
-            history, snap_x, snap_d1, info):
-    """Advance the rod by up to n_steps steps of floats[F_DT] from time t_start, in place.
+def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out):
+    """Advance the rod by up to n_steps steps of settings.dt from time t_start, in place.
 
-    history (H, N_HISTORY), snap_x (H, 3, n+1) and snap_d1 (H, 3, n) receive a row every
-    ints[I_HISTORY_EVERY] steps and at the end; H must be ≥ n_steps // every + 2.
+    rod: RodProperties, ends: Boundary, settings: Settings, tables: ControlTables, out: Output.
+    out.history (H, N_HISTORY), out.snap_x (H, 3, n+1) and out.snap_d1 (H, 3, n) receive a
+    row every settings.history_every steps and at the end; H must be ≥ n_steps // every + 2.
     probe_shape (3, n+1), largest row norm 1 and zero on held components, is the direction of
-    the stability probe (ints[I_PROBE]): a candidate equilibrium of a hold is displaced by
-    floats[F_PROBE_SIZE] along it, and the hold ends only once that displacement has decayed.
-    Returns (status, steps_taken, t_end, rows_written); info (N_INFO,) gets diagnostics.
+    the stability probe (settings.probe): a candidate equilibrium of a hold is displaced by
+    settings.probe_size along it, and the hold ends only once that displacement has decayed.
+    Returns (status, steps_taken, t_end, rows_written); out.info (N_INFO,) gets diagnostics.
+
+    A step composes the pieces above: controls at the half step -> loads (internal_loads,
+    the clamp couples, contact, external loads) -> kick -> guards -> record -> drift -> the
+    settled-shape windows and the equilibrium test (with the stability probe).
     """
+    rest_length = rod.rest_length
+    rest_voronoi = rod.rest_voronoi
+    node_mass = rod.node_mass
+    inertia = rod.inertia
+    shear_stiffness = rod.shear_stiffness
+    bend_stiffness = rod.bend_stiffness
+    rest_curvature = rod.rest_curvature
+    rest_shear = rod.rest_shear
+    rest_radius = rod.rest_radius
+    local_mask = rod.local_mask
+    end_position = ends.end_position
+    table_t = tables.times
+    table_v = tables.values
+    table_n = tables.counts
+    info = out.info
     n = rest_length.shape[0]
-    dt = floats[F_DT]
-    incompressible = ints[I_INCOMPRESSIBLE] != 0
-    contact_on = ints[I_CONTACT] != 0
-    exclusion = ints[I_EXCLUSION]
-    history_every = max(ints[I_HISTORY_EVERY], 1)
-    check_every = max(ints[I_CHECK_EVERY], 1)
-    stop_at_equilibrium = ints[I_STOP_AT_EQUILIBRIUM] != 0
-    seg_first = ints[I_SEGMENT_FIRST]
-    seg_last = ints[I_SEGMENT_LAST]
-    axis = floats[F_AXIS:F_AXIS + 3].copy()
-    force_dir = floats[F_FORCE_DIRECTION:F_FORCE_DIRECTION + 3].copy()
-    gravity = floats[F_GRAVITY:F_GRAVITY + 3].copy()
+    dt = settings.dt
+    incompressible = settings.incompressible
+    contact_on = settings.contact
+    history_every = max(settings.history_every, 1)
+    check_every = max(settings.check_every, 1)
+    stop_at_equilibrium = settings.stop_at_equilibrium
+    seg_first = ends.segment_first
+    seg_last = ends.segment_last
+    axis = ends.axis.copy()
+    force_dir = ends.force_direction.copy()
+    gravity = ends.gravity.copy()
     # Linear drag integrated exactly over a step (integrating factor): v' = a − νv gives
     # v ← v·e^{−νdt} + a·dt·(1 − e^{−νdt})/(νdt). Stable for any ν, and right in the
     # overdamped limit νdt ≫ 1 (velocity a/ν), where multiplying by e^{−νdt} alone stalls.
-    decay, gain = _drag_factors(floats[F_DAMPING] * dt)
+    decay, gain = _drag_factors(settings.damping * dt)
     decay_rotation = np.empty(3)
     gain_rotation = np.empty(3)
-    decay_rotation[0], gain_rotation[0] = _drag_factors(floats[F_DAMPING_ROTATION] * dt)
+    decay_rotation[0], gain_rotation[0] = _drag_factors(settings.damping_rotation * dt)
     decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
-    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * floats[F_DAMPING_ROTATION] * dt)
-    friction = floats[F_FRICTION]
-    slip_speed = floats[F_SLIP_SPEED]
-    skin = floats[F_SKIN]
-    near_skin = floats[F_NEAR_SKIN]
-    penetration_limit = floats[F_PENETRATION_LIMIT]
-    speed_limit = floats[F_SPEED_LIMIT]
-    tolerance = floats[F_TOLERANCE]
-    force_scale = floats[F_FORCE_SCALE]
-    length_scale = floats[F_LENGTH_SCALE]
-    equilibrium_after = floats[F_EQUILIBRIUM_AFTER]
-    quadratic_drag = floats[F_QUADRATIC_DRAG]
-    drag_radius = floats[F_DRAG_RADIUS]
-    settle_window = floats[F_SETTLE_WINDOW]
-    settle_distance = floats[F_SETTLE_DISTANCE]
+    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
+    penetration_limit = settings.penetration_limit
+    speed_limit = settings.speed_limit
+    tolerance = settings.tolerance
+    force_scale = settings.force_scale
+    length_scale = settings.length_scale
+    equilibrium_after = settings.equilibrium_after
+    quadratic_drag = settings.quadratic_drag
+    drag_radius = settings.drag_radius
+    settle_window = settings.settle_window
+    settle_distance = settings.settle_distance
     # Window means of node positions and of d1 (times the radius: a surface point), summed
     # at every check; the shape has settled when two consecutive window means agree and
     # within the window no point strayed from its mean (rms) by more than the same distance.
@@ -538,12 +1007,10 @@ def advance(x, v, Q, w, t_start, n_steps,
     work = np.zeros((N_WORK, n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
+    # the two-level Verlet list of contact (see _contact_loads)
     x_build = x.copy()
     pairs = np.empty((2, 16 * n + 64), dtype=np.int64)
     n_pairs = 0
-    # Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
-    # a node has moved skin/4 since x_build; `near` (the pairs of it within near_skin of
-    # touching) when gaps could have closed by near_skin since x_near / radius_near.
     x_near = x.copy()
     radius_near = rest_radius.copy()
     near = np.empty((2, pairs.shape[1]), dtype=np.int64)
@@ -558,8 +1025,6 @@ def advance(x, v, Q, w, t_start, n_steps,
     contact_energy = 0.0
     residual = np.inf
     kinetic = np.inf
-    held_start_frame = ints[I_START_FRAME_HELD] != 0
-    held_end_frame = ints[I_END_FRAME_HELD] != 0
     clamp = np.empty((3, 3))
     couple = np.empty(8)
     kinetic_before = 0.0
@@ -574,8 +1039,8 @@ def advance(x, v, Q, w, t_start, n_steps,
     # ends on an unstable equilibrium only where symmetry keeps the unstable mode unexcited
     # (the straight rod, a flat loop) and no contact confines it; a coil or braid in
     # contact creeps by more than a probe's return distance while its shape is settled.
-    probe_on = ints[I_PROBE] != 0 and stop_at_equilibrium
-    probe_size = floats[F_PROBE_SIZE]
+    probe_on = settings.probe and stop_at_equilibrium
+    probe_size = settings.probe_size
     probe_running = False
     probe_reference = x.copy()
     probe_norm2 = 0.0
@@ -592,31 +1057,23 @@ def advance(x, v, Q, w, t_start, n_steps,
     steps = 0
 
     # first half drift: positions to t + dt/2
-    for c in range(3):
-        for i in range(n + 1):
-            x[c, i] += 0.5 * dt * v[c, i]
-    rotate_frames(Q, w, 0.5 * dt)
+    _drift(x, v, Q, w, 0.5 * dt)
 
     for step in range(n_steps):
-        t_half = t + 0.5 * dt
-        rot_end = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION], table_n[T_END_ROTATION], t_half)
-        rot_start = table_value(table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_half)
-        disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t_half)
-        disp_rate = table_slope(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t_half)
-        end_force = table_value(table_t[T_END_FORCE], table_v[T_END_FORCE], table_n[T_END_FORCE], t_half)
-        f_stiff = table_value(table_t[T_STIFFNESS], table_v[T_STIFFNESS], table_n[T_STIFFNESS], t_half)
-        f_radius = table_value(table_t[T_RADIUS], table_v[T_RADIUS], table_n[T_RADIUS], t_half)
-        local_twist = table_value(table_t[T_LOCAL_TWIST], table_v[T_LOCAL_TWIST], table_n[T_LOCAL_TWIST], t_half)
-        local_pull = table_value(table_t[T_LOCAL_PULL], table_v[T_LOCAL_PULL], table_n[T_LOCAL_PULL], t_half)
-        _apply_held(x, v, ints, floats, start_position, end_position, disp, disp_rate)
+        # controls at the half step, where the positions are
+        u = _controls(tables, t + 0.5 * dt)
+        _apply_held(x, v, ends, u.displacement, u.displacement_rate)
 
-        # Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r (a·κ3⁰ fixed).
+        # loads. Growth keeps the density: area ∝ r², second moments ∝ r⁴, rest twist ∝ 1/r
+        # (a·κ3⁰ fixed).
+        f_stiff = u.stiffness
+        f_radius = u.radius
         r2 = f_radius * f_radius
         fb = f_stiff * r2 * r2
         f_radius_inv = 1.0 / f_radius
         internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                        bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
-                       f_stiff * r2, fb, r2 * r2, f_radius_inv, local_twist,
+                       f_stiff * r2, fb, r2 * r2, f_radius_inv, u.local_twist,
                        force, torque, dilatation, lengths, energies, work)
         if energies[2] < COS_MAX_TURN:
             # beyond 135° between neighbours the matrix log nears its branch cut at 180°,
@@ -629,35 +1086,19 @@ def advance(x, v, Q, w, t_start, n_steps,
         # centres: a bending/twisting spring over that half element (second order at the
         # boundary, and the twist put in spans the whole rest length L0).
         clamp_torque = 0.0
-        if held_start_frame:
-            rotated_frame(start_frame, axis, rot_start, clamp)
-            e0 = dilatation[0]
-            _clamp_couple(clamp, Q[:, :, 0], 0.5 * rest_length[0], rest_curvature[0, 0],
-                          rest_curvature[1, 0], f_radius_inv * rest_curvature[2, 0],
-                          fb * bend_stiffness[0, 0], fb * bend_stiffness[1, 0], fb * bend_stiffness[2, 0],
-                          1.0 / (e0 * e0 * e0) if incompressible else 1.0, couple)
-            for c in range(3):
-                torque[c, 0] += couple[3 + c] - couple[c]
-            energies[1] += couple[6]
+        if ends.start_frame_held:
+            _start_clamp_couple(Q, rod, ends.start_frame, axis, u.start_rotation, dilatation,
+                                f_radius_inv, fb, incompressible, torque, energies, clamp, couple)
             if couple[7] < COS_MAX_TURN:
                 # the clamp spring's log would wrap past 180° and twist the rod the wrong way
                 status = S_CLAMP_LAG
                 info[D_WHERE] = 0
                 info[D_VALUE] = np.arccos(max(couple[7], -1.0))
                 break
-        if held_end_frame:
-            rotated_frame(end_frame, axis, rot_end, clamp)
-            e1 = dilatation[n - 1]
-            _clamp_couple(Q[:, :, n - 1], clamp, 0.5 * rest_length[n - 1], rest_curvature[0, n - 2],
-                          rest_curvature[1, n - 2], f_radius_inv * rest_curvature[2, n - 2],
-                          fb * bend_stiffness[0, n - 2], fb * bend_stiffness[1, n - 2],
-                          fb * bend_stiffness[2, n - 2], 1.0 / (e1 * e1 * e1) if incompressible else 1.0,
-                          couple)
-            for c in range(3):
-                torque[c, n - 1] += couple[c] + couple[3 + c]
-                clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
-                                 + Q[2, c, n - 1] * couple[2]) * axis[c]
-            energies[1] += couple[6]
+        if ends.end_frame_held:
+            clamp_torque = _end_clamp_couple(Q, rod, ends.end_frame, axis, u.end_rotation,
+                                             dilatation, f_radius_inv, fb, incompressible, torque,
+                                             energies, clamp, couple)
             if couple[7] < COS_MAX_TURN:
                 status = S_CLAMP_LAG
                 info[D_WHERE] = n - 1
@@ -665,61 +1106,11 @@ def advance(x, v, Q, w, t_start, n_steps,
                 break
 
         if contact_on:
-            _radii(rest_radius, dilatation, f_radius, incompressible, radius)
-            moved = 0.0
-            moved_near = 0.0
-            for i in range(n + 1):
-                d0 = x[0, i] - x_build[0, i]
-                d1 = x[1, i] - x_build[1, i]
-                d2 = x[2, i] - x_build[2, i]
-                moved = max(moved, d0 * d0 + d1 * d1 + d2 * d2)
-                d0 = x[0, i] - x_near[0, i]
-                d1 = x[1, i] - x_near[1, i]
-                d2 = x[2, i] - x_near[2, i]
-                moved_near = max(moved_near, d0 * d0 + d1 * d1 + d2 * d2)
-            grown = 0.0
-            widest = 0.0
-            for i in range(n):
-                grown = max(grown, radius[i] - radius_near[i])
-                widest = max(widest, radius[i])
-            # A pair outside the long list needs its gap to shrink by > skin: midpoints and
-            # half-lengths each move by at most the largest node displacement, so 4·moved.
-            if rebuilds == 0 or 16.0 * moved > skin * skin or widest > radius_cut:
-                longest = 0.0
-                for i in range(n):
-                    longest = max(longest, lengths[i])
-                radius_cut = 1.1 * widest
-                pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
-                if near.shape[1] < pairs.shape[1]:
-                    near = np.empty((2, pairs.shape[1]), dtype=np.int64)
-                x_build[:, :] = x
-                rebuilds += 1
-                max_pairs = max(max_pairs, n_pairs)
-                moved_near = np.inf
-            # A gap changes by at most the two segments' largest node displacements plus the
-            # growth of the two radii (closest_parameters' fallback for segments parallel to
-            # 1e-6 rad adds up to 1e-6 of an element length: negligible against near_skin).
-            # With near_skin ≥ skin/2 this never fires between grid builds: the old, one-list
-            # behaviour.
-            if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
-                n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
-                x_near[:, :] = x
-                radius_near[:] = radius
-                near_rebuilds += 1
-            touching, worst, worst_at, contact_energy = add_contact_forces(
-                x, v, radius, near, n_near, contact_k, contact_c, f_stiff, friction, slip_speed,
-                1.0 if incompressible else 0.0, force)
-            # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
-            # strand can pass around such an end, so link leaves only where the scene lets it.
-            for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
-                if ints[I_START_BODY + which] != 0:
-                    body_touching, body_worst, body_energy = add_body_forces(
-                        x, v, radius, contact_k, contact_c, f_stiff, which * n,
-                        2.0 * which - 1.0, axis, floats[F_BODY_RADIUS], exclusion, force)
-                    touching += body_touching
-                    contact_energy += body_energy
-                    if body_worst > worst:
-                        worst, worst_at = body_worst, which * (n - 1)
+            (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
+             touching, worst, worst_at, contact_energy) = _contact_loads(
+                x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
+                x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
+                near_rebuilds, max_pairs, force)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -727,27 +1118,8 @@ def advance(x, v, Q, w, t_start, n_steps,
                 info[D_WHERE] = worst_at
                 info[D_VALUE] = worst
                 break
-
-        # external loads
-        for c in range(3):
-            force[c, n] += end_force * force_dir[c]
-        if gravity[0] != 0.0 or gravity[1] != 0.0 or gravity[2] != 0.0:
-            for c in range(3):
-                for i in range(n + 1):
-                    force[c, i] += node_mass[i] * r2 * gravity[c]
-        if local_pull != 0.0 and seg_last > seg_first:
-            d0 = x[0, seg_last] - x[0, seg_first]
-            d1 = x[1, seg_last] - x[1, seg_first]
-            d2 = x[2, seg_last] - x[2, seg_first]
-            dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            if dn > 0.0:
-                p = local_pull / dn
-                force[0, seg_first] += p * d0
-                force[1, seg_first] += p * d1
-                force[2, seg_first] += p * d2
-                force[0, seg_last] -= p * d0
-                force[1, seg_last] -= p * d1
-                force[2, seg_last] -= p * d2
+        _external_loads(x, node_mass, r2, u.end_force, force_dir, gravity, u.local_pull,
+                        seg_first, seg_last, force)
 
         t_next = t + dt
         last = step == n_steps - 1
@@ -756,165 +1128,35 @@ def advance(x, v, Q, w, t_start, n_steps,
         if record:
             # kinetic energy at t (before the kick); averaged with the one after it, it sits at
             # t + dt/2 with the potential energy, so the recorded total is second-order accurate
-            kinetic_before = 0.0
-            for i in range(n + 1):
-                kinetic_before += 0.5 * node_mass[i] * r2 * (v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
-            for i in range(n):
-                for c in range(3):
-                    kinetic_before += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
+            kinetic_before = _kinetic_energy(v, w, node_mass, inertia, r2)
 
-        # kick
-        for c in range(3):
-            for i in range(n + 1):
-                v[c, i] = v[c, i] * decay + gain * dt * force[c, i] * inv_mass[i] / r2
-        for c in range(3):
-            for i in range(n):
-                gi = dilatation[i] if incompressible else 1.0
-                w[c, i] = (w[c, i] * decay_rotation[c]
-                           + gain_rotation[c] * dt * gi * torque[c, i] * inv_inertia[c, i] / (r2 * r2))
-        if quadratic_drag > 0.0:
-            # Drag growing with speed (implicit, so stable at any speed): quasi-static motion
-            # barely feels it, but a snap-through cannot turn stored twist into speeds that
-            # no contact spring can stop. Equilibria do not depend on it.
-            for i in range(n + 1):
-                speed = np.sqrt(v[0, i] ** 2 + v[1, i] ** 2 + v[2, i] ** 2)
-                f = 1.0 / (1.0 + quadratic_drag * speed * dt)
-                v[0, i] *= f
-                v[1, i] *= f
-                v[2, i] *= f
-            for i in range(n):
-                spin = drag_radius * np.sqrt(w[0, i] ** 2 + w[1, i] ** 2 + w[2, i] ** 2)
-                f = 1.0 / (1.0 + quadratic_drag * spin * dt)
-                w[0, i] *= f
-                w[1, i] *= f
-                w[2, i] *= f
-        _hold_velocities(v, ints, floats, disp_rate)
+        _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
+              decay_rotation, gain_rotation, incompressible, quadratic_drag, drag_radius)
+        _hold_velocities(v, ends, u.displacement_rate)
 
         if check or record:
-            # Residual: largest nodal force and element torque / length on free degrees of freedom.
-            res = 0.0
-            kin = 0.0
-            for i in range(n + 1):
-                fm = 0.0
-                vv = 0.0
-                for c in range(3):
-                    held = (i == 0 and ints[I_START_HELD + c] != 0) or (i == n and ints[I_END_HELD + c] != 0)
-                    if not held:
-                        fm += force[c, i] * force[c, i]
-                    vv += v[c, i] * v[c, i]
-                res = max(res, np.sqrt(fm))
-                kin += 0.5 * node_mass[i] * r2 * vv
-                if not np.isfinite(vv) or not np.isfinite(fm):
-                    status = S_NAN
-                    info[D_WHERE] = i
-                    info[D_VALUE] = vv
-                    break
-                if vv > speed_limit * speed_limit:
-                    status = S_SPEED
-                    info[D_WHERE] = i
-                    info[D_VALUE] = np.sqrt(vv)
-                    break
+            status, res, kin = _guards(v, w, force, torque, ends, node_mass, inertia, rest_length,
+                                       r2, speed_limit, info)
             if status != S_COMPLETED:
-                break
-            for i in range(n):
-                tm = 0.0
-                for c in range(3):
-                    tm += torque[c, i] * torque[c, i]
-                    kin += 0.5 * inertia[c, i] * r2 * r2 * w[c, i] * w[c, i]
-                res = max(res, np.sqrt(tm) / rest_length[i])
-            if not np.isfinite(kin) or not np.isfinite(res):
-                status = S_NAN
-                info[D_WHERE] = -1
-                info[D_VALUE] = kin
                 break
             residual = res / force_scale
             kinetic = kin / (force_scale * length_scale)
             if record:
-                # positions are at t + dt/2; bring the recorded ones to t + dt
-                for c in range(3):
-                    for i in range(n + 1):
-                        snap_x[rows, c, i] = x[c, i] + 0.5 * dt * v[c, i]
-                Qs = Q.copy()
-                rotate_frames(Qs, w, 0.5 * dt)
-                for c in range(3):
-                    for i in range(n):
-                        snap_d1[rows, c, i] = Qs[0, c, i]
-                # axial force the outside exerts on node n: minus the rod's force on it
-                rod_on_end = 0.0
-                for c in range(3):
-                    rod_on_end += (force[c, n] - end_force * force_dir[c]) * axis[c]
-                end_disp = 0.0
-                for c in range(3):
-                    end_disp += (snap_x[rows, c, n] - end_position[c]) * axis[c]
-                history[rows, H_TIME] = t_next
-                history[rows, H_END_ROTATION] = table_value(table_t[T_END_ROTATION], table_v[T_END_ROTATION],
-                                                            table_n[T_END_ROTATION], t_next)
-                history[rows, H_END_FORCE] = -rod_on_end
-                history[rows, H_END_TORQUE] = clamp_torque
-                history[rows, H_END_DISPLACEMENT] = end_disp
-                history[rows, H_APPLIED_FORCE] = end_force
-                history[rows, H_STRETCH_ENERGY] = energies[0]
-                history[rows, H_BEND_ENERGY] = energies[1]
-                history[rows, H_KINETIC_ENERGY] = 0.5 * (kin + kinetic_before)
-                history[rows, H_CONTACTS] = touching
-                history[rows, H_PENETRATION] = worst
-                history[rows, H_RESIDUAL] = residual
-                history[rows, H_STIFFNESS] = f_stiff
-                history[rows, H_RADIUS_FACTOR] = f_radius
-                history[rows, H_CONTACT_ENERGY] = contact_energy
-                history[rows, H_START_ROTATION] = table_value(
-                    table_t[T_START_ROTATION], table_v[T_START_ROTATION], table_n[T_START_ROTATION], t_next)
+                _record(rows, x, v, Q, w, force, dt, t_next, u.end_force, force_dir, axis,
+                        end_position, tables, clamp_torque, energies, 0.5 * (kin + kinetic_before),
+                        touching, worst, residual, f_stiff, f_radius, contact_energy, out)
                 rows += 1
 
         # drift: a full step, or half a step to land on t + dt at the end
-        h = 0.5 * dt if last else dt
-        for c in range(3):
-            for i in range(n + 1):
-                x[c, i] += h * v[c, i]
-        rotate_frames(Q, w, h)
+        _drift(x, v, Q, w, 0.5 * dt if last else dt)
         t = t_next
         steps = step + 1
 
         if settle_on and check:
-            if t < equilibrium_after:
-                window_start = t  # controls still moving: windows start when they stop
-            else:
-                for c in range(3):
-                    for i in range(n + 1):
-                        window_sum[c, i] += x[c, i]
-                        window_squares[c, i] += x[c, i] * x[c, i]
-                    for i in range(n):
-                        surface = drag_radius * Q[0, c, i]
-                        window_sum[3 + c, i] += surface
-                        window_squares[3 + c, i] += surface * surface
-                window_count += 1
-                if t - window_start >= settle_window:
-                    motion = 0.0
-                    spread = 0.0
-                    for i in range(n + 1):
-                        dx = 0.0
-                        dd = 0.0
-                        vx = 0.0
-                        vd = 0.0
-                        for c in range(3):
-                            mean = window_sum[c, i] / window_count
-                            dx += (mean - window_mean[c, i]) ** 2
-                            vx += window_squares[c, i] / window_count - mean * mean
-                            window_mean[c, i] = mean
-                            mean = window_sum[3 + c, i] / window_count
-                            dd += (mean - window_mean[3 + c, i]) ** 2
-                            vd += window_squares[3 + c, i] / window_count - mean * mean
-                            window_mean[3 + c, i] = mean
-                        motion = max(motion, np.sqrt(dx) + np.sqrt(dd))
-                        spread = max(spread, np.sqrt(max(vx, 0.0)) + np.sqrt(max(vd, 0.0)))
-                    if have_mean:
-                        settle_motion = max(motion, spread)
-                        settled = settle_motion < settle_distance
-                    have_mean = True
-                    window_sum[:, :] = 0.0
-                    window_squares[:, :] = 0.0
-                    window_count = 0
-                    window_start = t
+            window_count, window_start, have_mean, settle_motion, settled = _settle_windows(
+                x, Q, t, drag_radius, settle_window, settle_distance, equilibrium_after,
+                window_sum, window_squares, window_mean, window_count, window_start, have_mean,
+                settle_motion, settled)
 
         accept = False
         if check and stop_at_equilibrium and t >= equilibrium_after:
@@ -926,29 +1168,18 @@ def advance(x, v, Q, w, t_start, n_steps,
                     # how much of the probe is left (its projection on the probe shape; an
                     # error of the candidate along other directions, e.g. the axial stretch
                     # still settling to the tolerance, does not count) and how far the rod went
-                    away = 0.0
-                    along = 0.0
-                    for i in range(n + 1):
-                        d0 = x[0, i] - probe_reference[0, i]
-                        d1 = x[1, i] - probe_reference[1, i]
-                        d2 = x[2, i] - probe_reference[2, i]
-                        away = max(away, d0 * d0 + d1 * d1 + d2 * d2)
-                        along += d0 * probe_shape[0, i] + d1 * probe_shape[1, i] + d2 * probe_shape[2, i]
-                    away = np.sqrt(away)
-                    along = abs(along) / (probe_size * probe_norm2)
-                    leave = floats[F_PROBE_LEAVE]
+                    away, along = _probe_distance(x, probe_reference, probe_shape, probe_size,
+                                                  probe_norm2)
+                    leave = settings.probe_leave
                     if away > leave * probe_size or along > leave:
                         probe_running = False
                         probes_left += 1
-                    elif at_rest and along < floats[F_PROBE_RETURN]:
+                    elif at_rest and along < settings.probe_return:
                         accept = True
                 elif at_rest and touching > 0:
                     accept = True  # held by contact: see the note on the probe above
                 elif at_rest:
-                    probe_reference[:, :] = x
-                    for c in range(3):
-                        for i in range(n + 1):
-                            x[c, i] += probe_size * probe_shape[c, i]
+                    _start_probe(x, probe_reference, probe_shape, probe_size)
                     probe_running = True
                     probes += 1
                     # the shape test starts afresh: the windows before the probe say nothing
@@ -963,15 +1194,12 @@ def advance(x, v, Q, w, t_start, n_steps,
             info[D_SETTLED] = 0.0 if residual < tolerance and kinetic < tolerance * tolerance else 1.0
             if not last:
                 # undo the extra half step so the state is at time t
-                for c in range(3):
-                    for i in range(n + 1):
-                        x[c, i] -= 0.5 * dt * v[c, i]
-                rotate_frames(Q, w, -0.5 * dt)
+                _drift(x, v, Q, w, -0.5 * dt)
             break
 
     if status == S_COMPLETED or status == S_EQUILIBRIUM:
         disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t)
-        _apply_held(x, v, ints, floats, start_position, end_position, disp, 0.0)
+        _apply_held(x, v, ends, disp, 0.0)
     info[D_MAX_PENETRATION] = max_penetration
     info[D_REBUILDS] = rebuilds
     info[D_MAX_PAIRS] = max_pairs

@@ -16,16 +16,6 @@ from ..result import HISTORY_COLUMNS, RunResult, rotation_put_in
 from . import kernel as k
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
-# per guard: the short name for diagnostics["guard"] (what a caller may act on) and the
-# words for the message
-_GUARDS = {
-    k.S_NAN: ("non_finite", "non-finite state (NaN or inf)"),
-    k.S_SPEED: ("speed", "runaway velocity"),
-    k.S_PENETRATION: ("penetration", "contact penetration"),
-    k.S_RESOLUTION: ("resolution", "under-resolved rod (neighbouring frames turned by more than 135°)"),
-    k.S_CLAMP_LAG: ("clamp_lag", "end frame lagging its turning clamp by more than 135°"),
-}
-
 
 def _table_arrays(tables: list[Table], shift: float):
     width = max(len(t[0]) for t in tables)
@@ -99,60 +89,65 @@ def _rod_arrays(problem: Problem):
                 contact_c=contact_c)
 
 
-def _settings(problem: Problem, ends: Ends, dt: float, history_every: int,
-              until_equilibrium: bool, equilibrium_after: float, controls: Controls):
+def _kernel_inputs(problem: Problem, ends: Ends, dt: float, history_every: int,
+                   until_equilibrium: bool, equilibrium_after: float, controls: Controls,
+                   start_position, end_position, start_frame, end_frame):
+    """The kernel's Boundary and Settings for one stage, field by field (see rod/kernel.py)."""
     rod, contact, solver = problem.rod, problem.contact, problem.solver
-    ints = np.zeros(k.N_INTS, dtype=np.int64)
-    ints[k.I_INCOMPRESSIBLE] = rod.incompressible
-    ints[k.I_CONTACT] = contact.enabled
+    axis = np.asarray(ends.axis, float)
+    fdir = np.asarray(controls.force_direction, float)
+    first, last = controls.segment
+    boundary = k.Boundary(
+        start_held=np.asarray(ends.start_held, dtype=np.int64),
+        start_frame_held=bool(ends.start_frame_held),
+        end_held=np.asarray(ends.end_held, dtype=np.int64),
+        end_frame_held=bool(ends.end_frame_held),
+        start_position=start_position, end_position=end_position,
+        start_frame=start_frame, end_frame=end_frame,
+        axis=axis / np.linalg.norm(axis),
+        force_direction=fdir / np.linalg.norm(fdir),
+        start_body=bool(ends.start_body), end_body=bool(ends.end_body),
+        body_radius=float(ends.body_radius * rod.radius),
+        segment_first=int(first), segment_last=int(last),
+        gravity=np.asarray(controls.gravity, dtype=float).copy(),
+    )
     # Neighbours along the rod closer than `exclusion` radii always overlap as capsules; they
     # are excluded at the largest radius any stage grows to, or a growing rod (the muscle)
     # would push apart elements a few apart along it as if they touched.
     grown = max(_table_extreme(c.radius, max) for c in _all_controls(problem))
-    ints[k.I_EXCLUSION] = max(1, math.ceil(contact.exclusion * rod.radius * grown / rod.element_length))
-    ints[k.I_START_HELD:k.I_START_HELD + 3] = ends.start_held
-    ints[k.I_START_FRAME_HELD] = ends.start_frame_held
-    ints[k.I_END_HELD:k.I_END_HELD + 3] = ends.end_held
-    ints[k.I_END_FRAME_HELD] = ends.end_frame_held
-    ints[k.I_SEGMENT_FIRST], ints[k.I_SEGMENT_LAST] = controls.segment
-    ints[k.I_HISTORY_EVERY] = history_every
-    ints[k.I_CHECK_EVERY] = solver.check_interval
-    ints[k.I_STOP_AT_EQUILIBRIUM] = until_equilibrium
-    ints[k.I_START_BODY] = ends.start_body
-    ints[k.I_END_BODY] = ends.end_body
-    ints[k.I_PROBE] = solver.stability_probe
-    floats = np.zeros(k.N_FLOATS)
-    floats[k.F_DT] = dt
-    floats[k.F_DAMPING] = solver.damping
-    floats[k.F_DAMPING_ROTATION] = (rotational_damping_auto(rod)
-                                    if solver.rotational_damping is None
-                                    else solver.rotational_damping)
-    floats[k.F_FRICTION] = contact.friction
-    floats[k.F_SLIP_SPEED] = contact.slip_speed
-    floats[k.F_SKIN] = contact.skin * rod.radius
-    floats[k.F_NEAR_SKIN] = contact.near_skin * rod.radius
-    floats[k.F_BODY_RADIUS] = ends.body_radius * rod.radius
-    floats[k.F_PROBE_SIZE] = solver.probe_size * rod.radius
-    floats[k.F_PROBE_RETURN] = solver.probe_return
-    floats[k.F_PROBE_LEAVE] = solver.probe_leave
-    floats[k.F_PENETRATION_LIMIT] = contact.penetration_limit
     c_axial = math.sqrt(rod.wave_moduli[0] / rod.density)
-    floats[k.F_SPEED_LIMIT] = solver.speed_limit if solver.speed_limit is not None else c_axial
-    floats[k.F_TOLERANCE] = solver.tolerance
-    floats[k.F_FORCE_SCALE] = force_scale(problem)
-    floats[k.F_LENGTH_SCALE] = rod.length
-    axis = np.asarray(ends.axis, float)
-    floats[k.F_AXIS:k.F_AXIS + 3] = axis / np.linalg.norm(axis)
-    fdir = np.asarray(controls.force_direction, float)
-    floats[k.F_FORCE_DIRECTION:k.F_FORCE_DIRECTION + 3] = fdir / np.linalg.norm(fdir)
-    floats[k.F_GRAVITY:k.F_GRAVITY + 3] = controls.gravity
-    floats[k.F_EQUILIBRIUM_AFTER] = equilibrium_after
-    floats[k.F_QUADRATIC_DRAG] = solver.quadratic_drag
-    floats[k.F_DRAG_RADIUS] = rod.radius
-    floats[k.F_SETTLE_WINDOW] = solver.settle_window
     scale = solver.settle_scale if solver.settle_scale is not None else rod.length
-    floats[k.F_SETTLE_DISTANCE] = solver.tolerance * scale
-    return ints, floats
+    settings = k.Settings(
+        dt=float(dt),
+        incompressible=bool(rod.incompressible),
+        damping=float(solver.damping),
+        damping_rotation=float(rotational_damping_auto(rod) if solver.rotational_damping is None
+                               else solver.rotational_damping),
+        quadratic_drag=float(solver.quadratic_drag),
+        drag_radius=float(rod.radius),
+        contact=bool(contact.enabled),
+        exclusion=int(max(1, math.ceil(contact.exclusion * rod.radius * grown / rod.element_length))),
+        friction=float(contact.friction),
+        slip_speed=float(contact.slip_speed),
+        skin=float(contact.skin * rod.radius),
+        near_skin=float(contact.near_skin * rod.radius),
+        penetration_limit=float(contact.penetration_limit),
+        speed_limit=float(solver.speed_limit if solver.speed_limit is not None else c_axial),
+        history_every=int(history_every),
+        check_every=int(solver.check_interval),
+        stop_at_equilibrium=bool(until_equilibrium),
+        equilibrium_after=float(equilibrium_after),
+        tolerance=float(solver.tolerance),
+        force_scale=float(force_scale(problem)),
+        length_scale=float(rod.length),
+        settle_window=float(solver.settle_window),
+        settle_distance=float(solver.tolerance * scale),
+        probe=bool(solver.stability_probe),
+        probe_size=float(solver.probe_size * rod.radius),
+        probe_return=float(solver.probe_return),
+        probe_leave=float(solver.probe_leave),
+    )
+    return boundary, settings
 
 
 def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:
@@ -240,7 +235,7 @@ def _stage_entry(label: str, steps: int, end_time: float, code: int, info: np.nd
             "settle_motion": float(info[k.D_SETTLE_MOTION])}
 
 
-def _unmet_criteria(solver, floats, info) -> str:
+def _unmet_criteria(solver, settings, info) -> str:
     """Which of the hold's equilibrium tests failed at its end, each with value and threshold."""
     tol = solver.tolerance
     failed = []
@@ -249,18 +244,18 @@ def _unmet_criteria(solver, floats, info) -> str:
         failed.append(f"residual force {residual:.2g} of the force scale (needs < {tol:g})")
     if kinetic >= tol * tol:
         failed.append(f"kinetic energy {kinetic:.2g} of force scale × L0 (needs < {tol * tol:g})")
-    window = floats[k.F_SETTLE_WINDOW]
+    window = settings.settle_window
     if window > 0:
         motion = info[k.D_SETTLE_MOTION]
         if not np.isfinite(motion):
             failed.append(f"the shape had no two full {window:g} s windows to compare")
-        elif motion >= floats[k.F_SETTLE_DISTANCE]:
+        elif motion >= settings.settle_distance:
             failed.append(f"the window-mean shape moved {1e3 * motion:.3g} mm per {window:g} s "
-                          f"(needs < {1e3 * floats[k.F_SETTLE_DISTANCE]:.3g} mm)")
+                          f"(needs < {1e3 * settings.settle_distance:.3g} mm)")
     undecided = int(info[k.D_PROBES] - info[k.D_PROBES_LEFT])
     if undecided > 0 and not failed:
         failed.append("the stability probe of the last equilibrium neither decayed nor grew "
-                      f"(size {floats[k.F_PROBE_SIZE]:.3g} m; marginally stable)")
+                      f"(size {settings.probe_size:.3g} m; marginally stable)")
     elif undecided > 0:
         failed.append("a stability probe was still undecided")
     return "; ".join(failed) + "." if failed else "no test failed at the last check."
@@ -388,13 +383,14 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         tables = controls.tables()
         settled = shift + max(max(tb[0]) for tb in tables)
         ends = stage.ends if stage.ends is not None else problem.ends
-        ints, floats = _settings(problem, ends, dt, history_every, stage.until_equilibrium,
-                                 settled, controls)
         # Held components stay where the stage finds them, plus the displacement control,
         # when the stage has its own clock; on the run clock they are held from the start.
         if own or index == 0:
             start_position = state.x[:, 0].copy()
             end_position = state.x[:, n].copy()
+        boundary, settings = _kernel_inputs(problem, ends, dt, history_every,
+                                            stage.until_equilibrium, settled, controls,
+                                            start_position, end_position, start_frame, end_frame)
         table_t, table_v, table_n = _table_arrays(tables, shift)
         n_steps = int(math.ceil(stage.duration / dt - 1e-9))
         if n_steps <= 0:
@@ -414,22 +410,19 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         hist = np.zeros((capacity, k.N_HISTORY))
         snap_x = np.zeros((capacity, 3, n + 1))
         snap_d = np.zeros((capacity, 3, n))
+        rod_properties = k.RodProperties(local_mask=_local_mask(n, controls.segment), **arrays)
         code, steps, t_end, rows = k.advance(
-            state.x, state.v, state.Q, state.w, t0, n_steps,
-            arrays["rest_length"], arrays["rest_voronoi"], arrays["node_mass"], arrays["inertia"],
-            arrays["shear_stiffness"], arrays["bend_stiffness"], arrays["rest_curvature"],
-            arrays["rest_shear"], arrays["rest_radius"], arrays["contact_k"], arrays["contact_c"],
-            _local_mask(n, controls.segment), probe_shape(n, ends.axis, problem.solver.probe_seed + index),
-            ints, floats, start_position, end_position,
-            start_frame, end_frame, table_t, table_v, table_n, hist, snap_x, snap_d, info)
+            state.x, state.v, state.Q, state.w, float(t0), int(n_steps), rod_properties,
+            boundary, settings, k.ControlTables(table_t, table_v, table_n),
+            probe_shape(n, ends.axis, problem.solver.probe_seed + index),
+            k.Output(hist, snap_x, snap_d, info))
         state.time = t_end
         steps_total += steps
         rebuilds += int(info[k.D_REBUILDS])
         near_rebuilds += int(info[k.D_NEAR_REBUILDS])
         max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
         max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
-        axis = floats[k.F_AXIS:k.F_AXIS + 3]
-        hist[:rows, k.H_END_DISPLACEMENT] += (end_position - initial_end) @ axis
+        hist[:rows, k.H_END_DISPLACEMENT] += (end_position - initial_end) @ boundary.axis
         rows_h.append(hist[:rows])
         rows_x.append(snap_x[:rows])
         rows_d.append(snap_d[:rows])
@@ -438,18 +431,10 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         stage_states.append((state.positions, state.directors))
         label = stage.label or f"stage {index}"
         stage_report.append(_stage_entry(label, steps, t_end, code, info))
-        if code in _GUARDS:
+        if code in k.GUARDS:
             status = "unstable"
-            guard, guard_words = _GUARDS[code]
+            guard, guard_words, unit, advice = k.GUARDS[code]
             where = int(info[k.D_WHERE])
-            unit = {k.S_PENETRATION: "element", k.S_RESOLUTION: "Voronoi domain",
-                    k.S_CLAMP_LAG: "element"}.get(code, "node")
-            advice = {
-                k.S_RESOLUTION: "Use more rod.elements (twist per element = Φa·L0/(a·n) rad).",
-                k.S_CLAMP_LAG: "The twist is put in faster than it spreads along the rod: lower "
-                               "loading.twist_rate (turns/s).",
-            }.get(code, "Try a smaller solver.dt or solver.safety, more solver.damping, or a "
-                        "stiffer contact.stiffness.")
             if problem.solver.dt is not None and dt > bound:
                 # an explicit step above its bound blows up in whatever guard it meets first
                 # (often the 135° one): name the step, and do not let a sweep refine the rod
@@ -464,7 +449,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         if stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
             status = "not_converged"
             message = f"{label} did not reach equilibrium in {stage.duration:g} s: " + \
-                _unmet_criteria(problem.solver, floats, info) + \
+                _unmet_criteria(problem.solver, settings, info) + \
                 " Hold longer (solver.hold_max_time) or damp more (solver.damping)."
         if steps_total >= budget:
             if status == "ok":

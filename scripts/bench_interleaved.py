@@ -1,0 +1,106 @@
+#!/usr/bin/env python
+"""Kernel cost of two versions of the code, interleaved: CPU µs per step at n = 150.
+
+    python scripts/bench_interleaved.py OLD_ROOT NEW_ROOT [--rounds 7] [--steps 20000]
+
+OLD_ROOT and NEW_ROOT are directories holding a `rodphase` package (e.g. `git archive main
+rodphase | tar -x -C /tmp/old` and the work tree). Each round runs one subprocess per version
+and case, alternating, so that a machine shared with other work slows both alike; each
+subprocess warms the kernel first (numba compiles or loads its cache) and times only
+`simulate` with the process's CPU time (time.process_time), not wall time. Two cases:
+"contact", a 150-element plectoneme held under its load and twist with self-contact (the
+state is made once by OLD's code, then both versions start from it), and "free", the straight
+rod twisted below its buckling onset without contact. Prints medians and spread (min-max) per
+version and case, and the ratio new/old of the medians.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+STATE = "/tmp/rodphase_bench_state_150.npz"
+
+CHILD = r"""
+import dataclasses, json, sys, time
+import numpy as np
+from rodphase import config as C
+from rodphase.rod import simulate, time_step
+from rodphase.rod.model import Stage, constant, state_from
+from rodphase.scenes import SCENES, build
+
+case, steps, state_path = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+over = [("rod.elements", 150), ("loading.twist_rate", 1.0)]
+if case == "make":
+    over += [("loading.twist_density", 1.0), ("solver.hold_max_time", 2.0)]
+    r = simulate(build(C.load_scene("twist_under_load", over, SCENES)))
+    np.savez(state_path, positions=r.positions, directors=r.directors)
+    print(json.dumps({"contacts": float(r.history["contacts"][-1])}))
+    sys.exit()
+contact = case == "contact"
+over += [("loading.twist_density", 1.0 if contact else 0.3), ("physics.self_contact", contact)]
+problem = build(C.load_scene("twist_under_load", over, SCENES))
+if contact:
+    saved = np.load(state_path)
+    problem = dataclasses.replace(problem, state=state_from(saved["positions"], saved["directors"]))
+def timed(n):
+    dt, _ = time_step(problem)
+    # the state carries the twist already; its end frames are the clamps (no further turn)
+    controls = dataclasses.replace(problem.stages[-1].controls, end_rotation=constant(0.0))
+    stage = Stage((n - 0.5) * dt, until_equilibrium=False, label="timed", controls=controls)
+    p = dataclasses.replace(problem, stages=[stage])
+    t0 = time.process_time()
+    r = simulate(p, max_steps=n)
+    return time.process_time() - t0, r
+timed(200)  # compile or load the cache
+cpu, r = timed(steps)
+print(json.dumps({"us_per_step": 1e6 * cpu / r.diagnostics["steps"], "steps": r.diagnostics["steps"],
+                  "contacts": float(r.history["contacts"][-1]), "status": r.status}))
+"""
+
+
+def run(root: str, case: str, steps: int) -> dict:
+    env = dict(os.environ, PYTHONPATH=root)
+    out = subprocess.run([sys.executable, "-c", CHILD, case, str(steps), STATE], env=env, cwd="/",
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("old")
+    parser.add_argument("new")
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--steps", type=int, default=20000)
+    args = parser.parse_args()
+    if not os.path.exists(STATE):
+        print("making the plectoneme state:", run(args.old, "make", 0))
+    times = {(v, c): [] for v in ("old", "new") for c in ("contact", "free")}
+    for r in range(args.rounds):
+        order = ("old", "new") if r % 2 == 0 else ("new", "old")
+        for case in ("contact", "free"):
+            for version in order:
+                res = run(getattr(args, version), case, args.steps)
+                times[version, case].append(res["us_per_step"])
+                print(f"round {r} {case:7s} {version}: {res['us_per_step']:.2f} µs/step "
+                      f"({res['steps']} steps, {res['contacts']:.0f} contacts, {res['status']})",
+                      flush=True)
+    for case in ("contact", "free"):
+        med = {}
+        for version in ("old", "new"):
+            t = times[version, case]
+            med[version] = statistics.median(t)
+            print(f"{case:7s} {version}: median {med[version]:.2f} µs/step, "
+                  f"spread {min(t):.2f}-{max(t):.2f} ({len(t)} runs)")
+        print(f"{case:7s} new/old: {med['new'] / med['old']:.3f}")
+
+
+if __name__ == "__main__":
+    main()
