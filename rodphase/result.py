@@ -29,7 +29,16 @@ HISTORY = (
     ("start_rotation", "rad", "the start rotation control"),
 )
 HISTORY_COLUMNS = tuple(name for name, _, _ in HISTORY)
-HISTORY_UNITS = {name: unit for name, unit, _ in HISTORY}
+# columns added after the kernel ran (the stage index; topology from the snapshots)
+DERIVED_HISTORY = (
+    ("stage", "1", "index of the protocol stage"),
+    ("link", "turns", "Lk of the open rod"),
+    ("twist", "turns", "Tw of the open rod"),
+    ("writhe", "turns", "Wr of the open rod"),
+    ("link_escapes", "1", "cumulative count of link escapes"),
+)
+# the unit of every history column as stored ("1": dimensionless, a count or an index)
+HISTORY_UNITS = {name: unit for name, unit, _ in HISTORY + DERIVED_HISTORY}
 
 
 def rotation_put_in(history: dict) -> np.ndarray:
@@ -76,17 +85,6 @@ class RunResult:
     @property
     def end_rotation_turns(self) -> np.ndarray:
         return self.history["end_rotation"] / (2 * np.pi)
-
-
-# units of the history columns as stored ("1": dimensionless, a count or an index)
-HISTORY_UNITS = {
-    "time": "s", "end_rotation": "rad", "end_force": "N", "end_torque": "N m",
-    "end_displacement": "m", "applied_force": "N", "stretch_energy": "J", "bend_energy": "J",
-    "kinetic_energy": "J", "contacts": "1", "penetration": "1", "residual": "1",
-    "stiffness_factor": "1", "radius_factor": "1", "contact_energy": "J",
-    "start_rotation": "rad", "stage": "1", "link": "turns", "twist": "turns",
-    "writhe": "turns", "link_escapes": "1",
-}
 
 
 def history_unit(name: str) -> str:
