@@ -72,7 +72,7 @@ def load_sweep(sweep, overrides=None, **settings) -> tuple[C.Frozen, C.Frozen]:
 def run(scene, overrides=None, **settings):
     """Simulate one scene (see `load` for the arguments) and return its RunResult. A run that
     goes unstable or does not settle comes back with that status; it does not raise."""
-    from .sweep import run_scene
+    from .runner import run_scene
 
     return run_scene(load(scene, overrides, **settings))
 

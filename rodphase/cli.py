@@ -86,8 +86,8 @@ def run(scene, output, sets, force):
     from .scenes import SCENES
 
     cfg = C.load_scene(scene, _overrides(sets), SCENES)
+    from .runner import run_scene
     from .store import open_store
-    from .sweep import run_scene
     from .tabulate import classify_store
 
     _make_parent(output)
@@ -95,7 +95,7 @@ def run(scene, output, sets, force):
     # be written is refused before it costs anything
     with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
                     version=__version__, kind="run", replace=force) as store:
-        from .sweep import compile_kernel
+        from .runner import compile_kernel
 
         click.echo("Compiling the kernel (once; numba caches it on disk) ...")
         click.echo(f"  ready in {compile_kernel():.1f} s")  # kept out of the run's own timing

@@ -74,10 +74,10 @@ def imperfection(cfg, rod: Rod) -> np.ndarray:
     return kappa
 
 
-def hold_stage(cfg, controls: Controls, label="hold") -> Stage:
+def hold_stage(cfg, controls: Controls, label="hold", sample: int | None = None) -> Stage:
     s = cfg.solver
     return Stage(s.hold_max_time, until_equilibrium=s.hold_until == "equilibrium", label=label,
-                 controls=controls)
+                 controls=controls, sample=sample)
 
 
 def _problem(cfg, rod, state, stages, ends=None, rest_curvature=None, force_scale=None) -> Problem:
@@ -121,7 +121,8 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
         if turns != previous:
             stages.append(twist_stages(cfg, force, previous, turns, label=f"twist {k}"))
         stages.append(hold_stage(cfg, Controls(end_force=constant(force),
-                                               end_rotation=constant(TURN * turns)), f"hold {k}"))
+                                               end_rotation=constant(TURN * turns)), f"hold {k}",
+                                  sample=k))
         previous = turns
     return _problem(cfg, rod, straight_state(rod), stages, rest_curvature=imperfection(cfg, rod))
 

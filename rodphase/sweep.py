@@ -28,6 +28,7 @@ from . import __version__
 from . import config as C
 from .result import RunResult
 from .rod.simulate import current_radii
+from .runner import compile_kernel, run_scene
 
 log = logging.getLogger(__name__)
 
@@ -105,41 +106,6 @@ def single_threaded_numba():
         numba.set_num_threads(previous)
 
 
-def run_scene(scene, *, topology: bool | None = None,
-              twist_targets: list[float] | None = None) -> RunResult:
-    """Build and simulate one scene: a validated config (used as it is) or a plain mapping
-    (validated first). Never raises for a failed run: a run that goes unstable comes back
-    with that status."""
-    from .rod import simulate
-    from .scenes import SCENES, build
-
-    cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
-    extra = {} if twist_targets is None else {"twist_targets": twist_targets}
-    want_topology = cfg.output.topology if topology is None else topology
-
-    def run(cfg):
-        return simulate(build(cfg, **extra), max_steps=cfg.solver.max_steps, topology=want_topology)
-
-    tried = [cfg.rod.elements]
-    result = run(cfg)
-    wall_before = 0.0
-    # A rod turned by > 135° between neighbouring frames needs more elements, not a smaller
-    # step: with solver.refine_up_to, run it again with twice as many (up to that number).
-    while (result.diagnostics.get("guard") == "resolution"
-           and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
-        wall_before += result.diagnostics["wall_time"]
-        tried.append(min(2 * tried[-1], cfg.solver.refine_up_to))
-        cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", tried[-1])]), SCENES)
-        result = run(cfg)
-    if len(tried) > 1:
-        result.diagnostics["refined_from"] = tried[:-1]
-        result.diagnostics["wall_time_before_refining"] = wall_before
-        result.diagnostics["notes"].append(
-            f"under-resolved at {', '.join(map(str, tried[:-1]))} elements; this is the run "
-            f"with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to})")
-    return result
-
-
 def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
     """Worker entry point: one (run_id, params, result or None, error text) per sample."""
     if job.builder is not None:
@@ -165,7 +131,7 @@ def split_continuation(result: RunResult, k: int, incompressible: bool = True) -
     from dataclasses import replace
 
     stages = result.diagnostics.get("stages", [])
-    index = next((i for i, st in enumerate(stages) if st["label"] == f"hold {k}"), None)
+    index = next((i for i, st in enumerate(stages) if st.get("sample") == k), None)
     if index is None:
         return replace(result, status=result.status if result.status != "ok" else "error",
                        message=f"the continuation stopped before sample {k}: {result.message}",
@@ -261,25 +227,6 @@ class SweepReport:
     failures: list[tuple[str, str, str]]  # run_id, status, message
     compile_time: float = 0.0  # s spent compiling (or loading the cached kernel) first
     stopped_by: str | None = None  # SIGINT or SIGTERM if a signal stopped the sweep
-
-
-def compile_kernel() -> float:
-    """Run a tiny problem through every compiled function a sweep uses, in this process, and
-    return the seconds it took. numba writes the machine code to its disk cache, so workers
-    started afterwards load it instead of each compiling the same kernel at once (the first
-    sweep on a fresh install spent most of its time so)."""
-    from . import scenes
-
-    start = time.perf_counter()
-    cfg = C.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
-                            "loading": {"force_multiple": 25, "force_ramp_time": 1e-3,
-                                        "twist_density": 0.1, "twist_rate": 100.0},
-                            "solver": {"hold_max_time": 1e-3, "stability_probe": True}},
-                           scenes.SCENES)
-    from .rod import simulate
-
-    simulate(scenes.build(cfg), topology=True)
-    return time.perf_counter() - start
 
 
 def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "loky",

@@ -387,13 +387,13 @@ def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotati
     from _common import machine
 
     from rodphase import classify
-    from rodphase.rod import simulate
+    from rodphase.runner import run
     from rodphase.topology import topology_history
 
     sets = rodphase_sets(case, contact, dt, rotation_damping, bodies)
     problem = build_problem(case, sets, twist, kick, kick_scale, reference)
     cpu0 = time.process_time()
-    result = simulate(problem, topology=True)
+    result = run(problem, topology=True)
     cpu = time.process_time() - cpu0
     h = result.history
     X = result.snapshot_positions

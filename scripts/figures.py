@@ -65,7 +65,7 @@ TURN = units.TURN
 def _simulate(scene_plain: dict):
     import numba
 
-    from rodphase.sweep import run_scene
+    from rodphase.runner import run_scene
 
     numba.set_num_threads(1)
     return run_scene(scene_plain)
@@ -516,7 +516,7 @@ def figureS9(results: dict, out: Path, sets: list) -> dict:
 def figureS3(results: dict, out: Path, sets: list) -> dict:
     """Link escape: Lk, Tw, Wr against Φa with each escape (time, ΔLk) marked."""
     from rodphase import plot as P
-    from rodphase.rod.simulate import link_escapes
+    from rodphase.runner import link_escapes
 
     r = results["run"]
     h = r.history

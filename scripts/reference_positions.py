@@ -40,8 +40,8 @@ SCENES = {
 
 def run_all(only=None) -> dict[str, np.ndarray]:
     from rodphase import config as C
+    from rodphase.runner import run_scene
     from rodphase.scenes import SCENES as BUILDERS
-    from rodphase.sweep import run_scene
 
     out = {}
     for name, overrides in SCENES.items():

@@ -29,7 +29,7 @@ def test_overrides_as_a_dict_strings_pairs_and_keywords_mean_the_same():
 
 
 def test_run_returns_the_result_and_equals_the_cli_path():
-    from rodphase.sweep import run_scene
+    from rodphase.runner import run_scene
 
     result = rodphase.run("twist_under_load", TINY, loading__twist_density=0.3)
     same = run_scene(rodphase.load("twist_under_load", TINY, loading__twist_density=0.3).plain())

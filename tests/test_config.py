@@ -351,8 +351,10 @@ def _tracked(value, where=""):
 
 def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
     """A key that nothing reads is a setting that silently does nothing."""
+    import numpy as np
+
     import rodphase.rod
-    from rodphase import sweep
+    from rodphase import runner
     from rodphase.result import RunResult
 
     _Tracked.read = set()
@@ -360,7 +362,7 @@ def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
                         lambda raw, registered=None: _tracked(_VALIDATE(raw, registered)))
     # a run that reports itself under-resolved, so that the runner reads its refinement cap
     monkeypatch.setattr(rodphase.rod, "simulate", lambda problem, **kw: RunResult(
-        "unstable", "", None, None, None, None, {}, None, None,
+        "unstable", "", None, None, None, None, {}, np.zeros(0), np.zeros(0),
         {"guard": "resolution", "wall_time": 0.0}))
     # the other ways to give the load and the twist, read only when they are set
     others = [(f"loading.{k}", None) for k in ("force_multiple", "force", "extension",
@@ -371,7 +373,7 @@ def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
     for path in sorted((C.PACKAGE_CONFIGS / "scenes").glob("*.yaml")):
         for overrides in variants:
             raw = C.apply_overrides(C.read_yaml(path), overrides)
-            sweep.run_scene(raw)
+            runner.run_scene(raw)
     every = {(section, key) for section, fields in C.SCENE_SCHEMA.items() for key in fields}
     assert every - _Tracked.read == set()
 

@@ -18,11 +18,11 @@ pytestmark = pytest.mark.slow
 def runs():
     import crosscheck_pyelastica as cc
 
-    from rodphase.rod import simulate
+    from rodphase.runner import run
 
     sets = cc.rodphase_sets("solenoid", contact="example", dt="auto", rotation_damping="example")
     problem = cc.build_problem("solenoid", sets, twist="as-run", kick="load", reference=REF)
-    return np.load(REF), simulate(problem, topology=True)
+    return np.load(REF), run(problem, topology=True)
 
 
 def test_solenoid_before_buckling_matches_reference(runs):

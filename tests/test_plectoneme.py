@@ -5,7 +5,7 @@ import pytest
 
 from rodphase import config as C
 from rodphase.classify import alignment
-from rodphase.rod import simulate
+from rodphase.runner import run
 from rodphase.scenes import SCENES, build
 
 
@@ -17,7 +17,7 @@ def test_plectoneme_keeps_the_link_put_in_and_classifies_as_plectoneme():
     overrides = [("rod.elements", 64), ("loading.twist_density", 0.75), ("loading.twist_rate", 1.0),
                  ("solver.hold_max_time", 8.0)]
     cfg = C.load_scene("twist_under_load", overrides, SCENES)
-    result = simulate(build(cfg), topology=True)
+    result = run(build(cfg), topology=True)
     assert result.status in ("ok", "not_converged"), result.message
     assert result.diagnostics["max_penetration"] < 0.1
     turns = result.history["end_rotation"][-1] / (2 * np.pi)
@@ -37,7 +37,7 @@ def test_solenoid_forms_at_high_extension_and_keeps_the_link():
                  ("loading.twist_density", 1.55), ("loading.twist_rate", 1.0),
                  ("solver.hold_max_time", 8.0)]
     cfg = C.load_scene("twist_under_load", overrides, SCENES)
-    result = simulate(build(cfg), topology=True)
+    result = run(build(cfg), topology=True)
     assert result.status in ("ok", "not_converged"), result.message
     assert result.diagnostics["max_penetration"] < 0.05
     turns = result.history["end_rotation"][-1] / (2 * np.pi)
@@ -54,7 +54,7 @@ def _fig2a_fast(bodies: str):
     overrides = [("rod.elements", 64), ("loading.twist_rate", 1.0), ("solver.hold_max_time", 3.0),
                  ("ends.start_body", bodies), ("ends.end_body", bodies)]
     cfg = C.load_scene("fig2a_plectoneme", overrides, SCENES)
-    result = simulate(build(cfg), topology=True)
+    result = run(build(cfg), topology=True)
     assert result.status in ("ok", "not_converged"), result.message
     h = result.history
     turns = (h["end_rotation"] - h["start_rotation"]) / (2 * np.pi)
@@ -82,7 +82,7 @@ def test_a_loop_slipping_over_an_end_is_counted_as_an_escape_of_two_turns():
     assert events, "no escape at five times the rate without end bodies"
     count = int(h["link_escapes"][-1])
     assert count >= 1
-    from rodphase.rod.simulate import link_escapes
+    from rodphase.runner import link_escapes
 
     jumps = link_escapes(h)
     jumps = jumps[jumps != 0]

@@ -656,7 +656,7 @@ def test_a_fixed_dt_above_the_bound_is_named_not_blamed_on_resolution():
     # drag off (else the run is refused up front): a solver.dt 10x the bound blows up in some
     # guard; the message names solver.dt and the guard is "time_step", so a sweep with
     # refine_up_to does not rerun the rod at 2n, 4n, ... elements.
-    from rodphase.sweep import run_scene
+    from rodphase.runner import run_scene
 
     cfg = C.load_scene("twist_under_load", [("rod.elements", 16), ("solver.quadratic_drag", 0),
                                             ("solver.refine_up_to", 64)], SCENES)

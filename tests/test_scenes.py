@@ -13,8 +13,8 @@ import pytest
 from scipy.optimize import brentq
 
 from rodphase import config as C
+from rodphase import runner
 from rodphase.classify import alignment
-from rodphase.rod import simulate
 from rodphase.scenes import SCENES, build
 
 TURN = 2 * math.pi
@@ -22,7 +22,7 @@ TURN = 2 * math.pi
 
 def run(scene, **overrides):
     cfg = C.load_scene(scene, list(overrides.items()), SCENES)
-    result = simulate(build(cfg), topology=True)
+    result = runner.run(build(cfg), topology=True)
     # holds of contact-rich shapes may end not_converged (residual floor of contact
     # vibration); anything unstable is a failure
     assert result.status in ("ok", "not_converged"), result.message
@@ -282,6 +282,6 @@ def test_twist_put_in_faster_than_the_rod_follows_stops_and_names_the_twist_rate
     # the 1.91 turns). Now the run stops as unstable, says where, and names the key to change.
     cfg = C.load_scene("twist_under_load", [("rod.elements", 32), ("loading.twist_rate", 50.0),
                                             ("loading.twist_density", 0.3)], SCENES)
-    r = simulate(build(cfg), topology=True)
+    r = runner.run(build(cfg), topology=True)
     assert r.status == "unstable" and r.diagnostics["guard"] == "clamp_lag"
     assert "loading.twist_rate" in r.message and "element 31" in r.message

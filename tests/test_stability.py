@@ -98,8 +98,8 @@ def test_an_unstable_sweep_run_is_recorded_as_failed_not_as_a_phase():
     # Through the sweep path: a scene whose fixed dt is 3x the limit comes back unstable and
     # the table labels it "failed", never straight/plectoneme/solenoid.
     from rodphase import config as C
+    from rodphase.runner import run_scene
     from rodphase.scenes import SCENES
-    from rodphase.sweep import run_scene
     from rodphase.tabulate import summarize
 
     rod = paper_rod(20, 1e6)

@@ -330,8 +330,9 @@ def test_link_counts_the_rotation_of_both_clamps():
     # +0.45 turns carries Lk = Tw = 0.75 turns, Wr = 0 (it stays straight well below the
     # Greenhill onset). Before the fix the start clamp was taken at its first angle (Lk 0.45).
     # 1e-6: the twist of a straight rod is exact up to the closure's round-off.
-    from rodphase.rod import Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp, simulate
+    from rodphase.rod import Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp
     from rodphase.rod.model import straight_state
+    from rodphase.runner import run
 
     turn = 2 * np.pi
     rod = Rod(length=1.0, radius=0.025, elements=16)
@@ -341,7 +342,7 @@ def test_link_counts_the_rotation_of_both_clamps():
     hold = Controls(start_rotation=constant(-0.3 * turn), end_rotation=constant(0.45 * turn))
     problem = Problem(rod=rod, state=straight_state(rod), ends=ends, solver=Solver(damping=40.0),
                       stages=(Stage(1.0, controls=twist), Stage(0.5, controls=hold)))
-    result = simulate(problem, topology=True)
+    result = run(problem, topology=True)
     assert result.ok, result.message
     h = result.history
     assert h["start_rotation"][-1] == pytest.approx(-0.3 * turn)

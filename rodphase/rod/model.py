@@ -231,6 +231,8 @@ class Stage:
     label: str = ""
     controls: Controls | None = None
     ends: Ends | None = None  # replaces the problem's ends; held places are taken at the stage start
+    # the sweep sample whose state this stage's end is (a continuation's holds), else None
+    sample: int | None = None
 
 
 @dataclass

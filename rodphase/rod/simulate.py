@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from ..result import HISTORY_COLUMNS, RunResult, rotation_put_in
+from ..result import HISTORY_COLUMNS, RunResult
 from . import kernel as k
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
@@ -170,51 +170,7 @@ def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:
     return start, end
 
 
-def _signed_angle(a: np.ndarray, b: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """Angle (rad) from a to b about `axis`, row by row, after projecting both on its normal plane."""
-    a = a - np.sum(a * axis, axis=1)[:, None] * axis
-    b = b - np.sum(b * axis, axis=1)[:, None] * axis
-    return np.arctan2(np.sum(axis * np.cross(a, b), axis=1), np.sum(a * b, axis=1))
-
-
-def clamp_twist(problem: Problem, start_frame, end_frame, history, positions, d1) -> np.ndarray:
-    """Turns of twist between each held clamp and the frame of the element next to it."""
-    from scipy.spatial.transform import Rotation
-
-    extra = np.zeros(len(positions))
-    axis = np.asarray(problem.ends.axis, float)
-    axis = axis / np.linalg.norm(axis)
-    if problem.ends.start_frame_held:
-        t0 = positions[:, 1] - positions[:, 0]
-        t0 /= np.linalg.norm(t0, axis=1)[:, None]
-        clamp = Rotation.from_rotvec(history["start_rotation"][:, None] * axis).apply(start_frame[0])
-        extra += _signed_angle(clamp, d1[:, 0], t0)
-    if problem.ends.end_frame_held:
-        t1 = positions[:, -1] - positions[:, -2]
-        t1 /= np.linalg.norm(t1, axis=1)[:, None]
-        clamp = Rotation.from_rotvec(history["end_rotation"][:, None] * axis).apply(end_frame[0])
-        extra += _signed_angle(d1[:, -1], clamp, t1)
-    return extra / (2 * np.pi)
-
-
 SNAPSHOT_LIMIT = 2e9  # bytes of snapshots one run may keep in memory
-
-# A change of link between two history rows that the clamps did not put in, larger than this
-# (turns), is an escape: link moves in whole crossings (a strand passing around an end changes
-# Lk by ±2, through the closure), while Lk = Tw + Wr and the clamp bookkeeping hold to 1e-6.
-ESCAPE_THRESHOLD = 0.5
-# Lk − turns put in − escapes, turns, beyond which a run is not `ok`: the open-ribbon closure
-# with slightly bent end tangents leaves up to 6e-3 (measured, a plectoneme at 5× the rate).
-LINK_TOLERANCE = 0.05
-
-
-def link_escapes(history: dict) -> np.ndarray:
-    """Per history row, the link (turns) that left or entered the rod since the row before,
-    beyond what the two clamps put in; 0 where nothing escaped. Needs both frames held."""
-    turns_in = rotation_put_in(history) / (2 * np.pi)
-    surplus = np.diff(history["link"] - turns_in, prepend=history["link"][:1] - turns_in[:1])
-    return np.where(np.abs(surplus) > ESCAPE_THRESHOLD, surplus, 0.0)
-
 
 def current_radii(rest_radius: float, incompressible: bool, rest_lengths: np.ndarray,
                   lengths: np.ndarray, radius_factor: float = 1.0) -> np.ndarray:
@@ -224,9 +180,11 @@ def current_radii(rest_radius: float, incompressible: bool, rest_lengths: np.nda
     return rest_radius * radius_factor * thinning
 
 
-def _stage_entry(label: str, steps: int, end_time: float, code: int, info: np.ndarray) -> dict:
+def _stage_entry(stage, label: str, steps: int, end_time: float, code: int,
+                 info: np.ndarray) -> dict:
     """One stage's report (diagnostics["stages"]) from the kernel's status code and info."""
-    return {"label": label, "steps": int(steps), "end_time": float(end_time),
+    return {"label": label, "sample": stage.sample, "steps": int(steps),
+            "end_time": float(end_time),
             "equilibrium": code == k.S_EQUILIBRIUM,
             "settled": bool(code == k.S_EQUILIBRIUM and info[k.D_SETTLED]),
             "residual": float(info[k.D_RESIDUAL]),
@@ -320,7 +278,7 @@ def _refused(problem: Problem, dt: float, bound: float, message: str) -> RunResu
                                   "youngs_modulus": problem.rod.youngs_modulus, "stages": []})
 
 
-def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool = False) -> RunResult:
+def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
     """Advance `problem.state` through `problem.stages` and return a RunResult.
 
     A stage with `until_equilibrium` ends early once the largest free nodal force (and
@@ -400,8 +358,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
             stage_states.append((state.positions, state.directors))
             nothing = np.zeros(k.N_INFO)
             nothing[[k.D_RESIDUAL, k.D_SETTLE_MOTION]] = np.nan
-            stage_report.append(_stage_entry(stage.label or f"stage {index}", 0, state.time,
-                                             k.S_COMPLETED, nothing))
+            stage_report.append(_stage_entry(stage, stage.label or f"stage {index}", 0,
+                                             state.time, k.S_COMPLETED, nothing))
             continue
         n_steps = min(n_steps, budget - steps_total)
         if n_steps <= 0:
@@ -430,7 +388,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
         stage_ends.append(sum(len(r) for r in rows_h) - 1)
         stage_states.append((state.positions, state.directors))
         label = stage.label or f"stage {index}"
-        stage_report.append(_stage_entry(label, steps, t_end, code, info))
+        stage_report.append(_stage_entry(stage, label, steps, t_end, code, info))
         if code in k.GUARDS:
             status = "unstable"
             guard, guard_words, unit, advice = k.GUARDS[code]
@@ -464,32 +422,6 @@ def simulate(problem: Problem, *, max_steps: int | None = None, topology: bool =
     snapshot_positions = (np.transpose(np.concatenate(rows_x), (0, 2, 1)) if rows_x
                           else np.zeros((0, n + 1, 3)))
     snapshot_d1 = np.transpose(np.concatenate(rows_d), (0, 2, 1)) if rows_d else np.zeros((0, n, 3))
-    if topology and len(snapshot_positions):
-        from ..topology import topology_history
-
-        lk, tw, wr = topology_history(snapshot_positions, snapshot_d1)
-        # The clamps sit half an element beyond the end frames; the twist over those halves
-        # belongs to the rod, so that a rod clamped at both ends carries Lk = turns put in.
-        extra = clamp_twist(problem, start_frame, end_frame, history, snapshot_positions, snapshot_d1)
-        history["link"], history["twist"], history["writhe"] = lk + extra, tw + extra, wr
-        if problem.ends.start_frame_held and problem.ends.end_frame_held:
-            escapes = link_escapes(history)
-            history["link_escapes"] = np.cumsum(np.abs(escapes) > 0).astype(float)
-            events = [{"time": float(history["time"][i]), "delta_link": float(escapes[i])}
-                      for i in np.flatnonzero(escapes)]
-            if events:
-                notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
-                             + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
-                                         for e in events) + ")")
-            turns_in = rotation_put_in(history) / (2 * np.pi)
-            unaccounted = float(np.max(np.abs(history["link"] - turns_in - np.cumsum(escapes))))
-            if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
-                status, guard = "unstable", "link"
-                message = (f"the stored link differs from the turns put in by {unaccounted:.3g} "
-                           f"turns with no escape to explain it (tolerance {LINK_TOLERANCE} "
-                           "turns): the twist was not carried by the rod as put in. Lower "
-                           "loading.twist_rate or use more rod.elements.")
-
     lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
     rest = arrays["rest_length"]
     radius_factor = float(hist[-1, k.H_RADIUS_FACTOR]) if len(hist) else 1.0

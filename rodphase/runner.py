@@ -1,0 +1,160 @@
+"""One run in one place: build a scene, simulate it, refine it if it was under-resolved,
+and account for its link. The CLI, the Python API, the sweep workers and the figure scripts
+all run a scene through `run_scene` (a Problem built in Python through `run`), so they give
+the same result for the same config; the engine (rodphase.rod) knows nothing of topology.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import config as C
+from .result import RunResult, rotation_put_in
+from .rod.model import Problem
+from .rod.simulate import clamp_frames
+
+# A change of link between two history rows that the clamps did not put in, larger than this
+# (turns), is an escape: link moves in whole crossings (a strand passing around an end changes
+# Lk by ±2, through the closure), while Lk = Tw + Wr and the clamp bookkeeping hold to 1e-6.
+ESCAPE_THRESHOLD = 0.5
+# Lk − turns put in − escapes, turns, beyond which a run is not `ok`: the open-ribbon closure
+# with slightly bent end tangents leaves up to 6e-3 (measured, a plectoneme at 5× the rate).
+LINK_TOLERANCE = 0.05
+
+
+def link_escapes(history: dict) -> np.ndarray:
+    """Per history row, the link (turns) that left or entered the rod since the row before,
+    beyond what the two clamps put in; 0 where nothing escaped. Needs both frames held."""
+    turns_in = rotation_put_in(history) / (2 * np.pi)
+    surplus = np.diff(history["link"] - turns_in, prepend=history["link"][:1] - turns_in[:1])
+    return np.where(np.abs(surplus) > ESCAPE_THRESHOLD, surplus, 0.0)
+
+
+def _signed_angle(a: np.ndarray, b: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Angle (rad) from a to b about `axis`, row by row, after projecting both on its normal plane."""
+    a = a - np.sum(a * axis, axis=1)[:, None] * axis
+    b = b - np.sum(b * axis, axis=1)[:, None] * axis
+    return np.arctan2(np.sum(axis * np.cross(a, b), axis=1), np.sum(a * b, axis=1))
+
+
+def clamp_twist(problem: Problem, start_frame, end_frame, history, positions, d1) -> np.ndarray:
+    """Turns of twist between each held clamp and the frame of the element next to it."""
+    from scipy.spatial.transform import Rotation
+
+    extra = np.zeros(len(positions))
+    axis = np.asarray(problem.ends.axis, float)
+    axis = axis / np.linalg.norm(axis)
+    if problem.ends.start_frame_held:
+        t0 = positions[:, 1] - positions[:, 0]
+        t0 /= np.linalg.norm(t0, axis=1)[:, None]
+        clamp = Rotation.from_rotvec(history["start_rotation"][:, None] * axis).apply(start_frame[0])
+        extra += _signed_angle(clamp, d1[:, 0], t0)
+    if problem.ends.end_frame_held:
+        t1 = positions[:, -1] - positions[:, -2]
+        t1 /= np.linalg.norm(t1, axis=1)[:, None]
+        clamp = Rotation.from_rotvec(history["end_rotation"][:, None] * axis).apply(end_frame[0])
+        extra += _signed_angle(d1[:, -1], clamp, t1)
+    return extra / (2 * np.pi)
+
+
+def with_topology(result: RunResult, problem: Problem) -> RunResult:
+    """Add Lk, Tw and Wr (turns) of every snapshot to the history, the clamps' share of the
+    twist included; with both frames held, count link escapes (history `link_escapes`, the
+    run's notes) and stop calling a run ok whose link the turns put in and the escapes do
+    not account for (guard `link`)."""
+    if not len(result.snapshot_positions):
+        return result
+    from .topology import topology_history
+
+    history, notes = result.history, result.diagnostics.setdefault("notes", [])
+    status, message = result.status, result.message
+    positions, d1 = result.snapshot_positions, result.snapshot_d1
+    lk, tw, wr = topology_history(positions, d1)
+    # The clamps sit half an element beyond the end frames; the twist over those halves
+    # belongs to the rod, so that a rod clamped at both ends carries Lk = turns put in.
+    start_frame, end_frame = clamp_frames(problem.state)
+    extra = clamp_twist(problem, start_frame, end_frame, history, positions, d1)
+    history["link"], history["twist"], history["writhe"] = lk + extra, tw + extra, wr
+    if problem.ends.start_frame_held and problem.ends.end_frame_held:
+        escapes = link_escapes(history)
+        history["link_escapes"] = np.cumsum(np.abs(escapes) > 0).astype(float)
+        events = [{"time": float(history["time"][i]), "delta_link": float(escapes[i])}
+                  for i in np.flatnonzero(escapes)]
+        if events:
+            notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
+                         + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
+                                     for e in events) + ")")
+        turns_in = rotation_put_in(history) / (2 * np.pi)
+        unaccounted = float(np.max(np.abs(history["link"] - turns_in - np.cumsum(escapes))))
+        if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
+            status = "unstable"
+            result.diagnostics["guard"] = "link"
+            message = (f"the stored link differs from the turns put in by {unaccounted:.3g} "
+                       f"turns with no escape to explain it (tolerance {LINK_TOLERANCE} "
+                       "turns): the twist was not carried by the rod as put in. Lower "
+                       "loading.twist_rate or use more rod.elements.")
+    result.status, result.message = status, message
+    return result
+
+
+def run(problem: Problem, *, max_steps: int | None = None, topology: bool = False) -> RunResult:
+    """Simulate a Problem (see rodphase.rod.simulate) and, with `topology`, account for its
+    link (see with_topology)."""
+    from .rod import simulate
+
+    result = simulate(problem, max_steps=max_steps)
+    return with_topology(result, problem) if topology else result
+
+
+def run_scene(scene, *, topology: bool | None = None,
+              twist_targets: list[float] | None = None) -> RunResult:
+    """Build and simulate one scene: a validated config (used as it is) or a plain mapping
+    (validated first). Never raises for a failed run: a run that goes unstable comes back
+    with that status. A run stopped by the 135° resolution guard is run again with twice the
+    elements, up to solver.refine_up_to; `twist_targets` (turns) makes it a continuation."""
+    from .scenes import SCENES, build
+
+    cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
+    extra = {} if twist_targets is None else {"twist_targets": twist_targets}
+    want_topology = cfg.output.topology if topology is None else topology
+
+    def once(cfg):
+        return run(build(cfg, **extra), max_steps=cfg.solver.max_steps, topology=want_topology)
+
+    tried = [cfg.rod.elements]
+    result = once(cfg)
+    wall_before = 0.0
+    # A rod turned by > 135° between neighbouring frames needs more elements, not a smaller
+    # step: with solver.refine_up_to, run it again with twice as many (up to that number).
+    while (result.diagnostics.get("guard") == "resolution"
+           and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
+        wall_before += result.diagnostics["wall_time"]
+        tried.append(min(2 * tried[-1], cfg.solver.refine_up_to))
+        cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", tried[-1])]), SCENES)
+        result = once(cfg)
+    if len(tried) > 1:
+        result.diagnostics["refined_from"] = tried[:-1]
+        result.diagnostics["wall_time_before_refining"] = wall_before
+        result.diagnostics["notes"].append(
+            f"under-resolved at {', '.join(map(str, tried[:-1]))} elements; this is the run "
+            f"with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to})")
+    return result
+
+
+def compile_kernel() -> float:
+    """Run a tiny problem through every compiled function a run uses, in this process, and
+    return the seconds it took. numba writes the machine code to its disk cache, so workers
+    started afterwards load it instead of each compiling the same kernel at once (the first
+    sweep on a fresh install spent most of its time so)."""
+    from . import scenes
+
+    start = time.perf_counter()
+    cfg = C.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
+                            "loading": {"force_multiple": 25, "force_ramp_time": 1e-3,
+                                        "twist_density": 0.1, "twist_rate": 100.0},
+                            "solver": {"hold_max_time": 1e-3, "stability_probe": True}},
+                           scenes.SCENES)
+    run(scenes.build(cfg), topology=True)
+    return time.perf_counter() - start
