@@ -377,15 +377,3 @@ def add_body_forces(x, v, radius, stiffness, damping, scale, end, side, axis, bo
         force[1, end] -= fn * n1
         force[2, end] -= fn * n2
     return touching, worst, energy
-
-
-def brute_force_pairs(x, exclusion, cutoff):
-    """All pairs within `cutoff` by the O(n²) definition; the reference the grid is tested against."""
-    mid = 0.5 * (x[:, 1:] + x[:, :-1])
-    n = mid.shape[1]
-    found = set()
-    for i in range(n):
-        for j in range(i + exclusion + 1, n):
-            if np.sum((mid[:, i] - mid[:, j]) ** 2) < cutoff * cutoff:
-                found.add((i, j))
-    return found
