@@ -82,7 +82,13 @@ def main(verbose):
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
 def run(scene, output, sets, force):
-    """Run one SCENE (a YAML file or a shipped scene name, see `rodphase scenes`)."""
+    """Run one SCENE (a YAML file or a shipped scene name, see `rodphase scenes`).
+
+    \b
+    Example:
+      rodphase run twist_under_load -o run.h5 --set loading.twist_density=1.2
+      rodphase run my_scene.yaml -o out/mine.h5 --set rod.elements=120
+    """
     from .scenes import SCENES
 
     cfg = C.load_scene(scene, _overrides(sets), SCENES)
@@ -136,6 +142,12 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
 
     Every finished run is safe on disk as soon as it is counted: after Ctrl-C, SIGTERM, a
     kill or a full disk, the same command goes on where the sweep stopped.
+
+    \b
+    Example:
+      rodphase sweep quick -o out/quick.h5 --jobs 2
+      rodphase sweep fig3_paper -o fig3.h5 --set sweep.samples=400 --set rod.elements=120
+      rodphase sweep fig3_paper -o fig3.h5 --backend dask --scheduler tcp://head:8786
     """
     from .scenes import SCENES
     from .sweep import run_sweep
@@ -178,7 +190,13 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
               help="Alignment above this is a solenoid (between: mixed).")
 @reports_errors
 def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
-    """Label every run of OUT.h5 by loop alignment and store the table back into it."""
+    """Label every run of OUT.h5 by loop alignment and store the table back into it.
+
+    \b
+    Example:
+      rodphase classify out/quick.h5 --csv out/quick.csv
+      rodphase classify out/quick.h5 --epsilon 0.3 --solenoid-above 0.6
+    """
     from .store import StoreBusy, edit_store, read_store, write_table_csv
     from .tabulate import classify_store, classify_table
 
@@ -324,7 +342,13 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
               help="Picture height in inches at 150 dpi (default: about 3).")
 @reports_errors
 def movie(store_file, run_id, output, fps, height):
-    """Animate one run's snapshots (3D rod)."""
+    """Animate one run's snapshots (3D rod), frames labelled with time and Φa.
+
+    \b
+    Example:
+      rodphase movie run.h5 --run run -o run.gif --fps 20
+      rodphase movie out/quick.h5 --run run-00003 -o rod.mp4 --height 4   # needs ffmpeg
+    """
     import shutil
 
     from . import plot as P
@@ -405,7 +429,13 @@ def config(name, sets):
 
 @main.command()
 def scenes():
-    """List the shipped scenes and sweeps."""
+    """List the shipped scenes and sweeps (usable by name in run, sweep and config).
+
+    \b
+    Example:
+      rodphase scenes
+      rodphase config fig2b_solenoid    # one of them, resolved
+    """
     import yaml
 
     root = C.PACKAGE_CONFIGS

@@ -379,3 +379,10 @@ def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
 
 
 _VALIDATE = C.validate_scene
+
+
+def test_every_command_has_an_example_in_its_help():
+    for name, command in main.commands.items():
+        result = run_cli([name, "--help"])
+        assert result.exit_code == 0 and "Example:" in result.output, name
+        assert f"rodphase {name}" in result.output.split("Example:")[1], name
