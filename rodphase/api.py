@@ -72,9 +72,10 @@ def load_sweep(sweep, overrides=None, **settings) -> tuple[C.Frozen, C.Frozen]:
 def run(scene, overrides=None, **settings):
     """Simulate one scene (see `load` for the arguments) and return its RunResult. A run that
     goes unstable or does not settle comes back with that status; it does not raise."""
-    from .runner import run_scene
+    from .runner import keep_snapshots, run_scene, snapshot_policy
 
-    return run_scene(load(scene, overrides, **settings))
+    cfg = load(scene, overrides, **settings)
+    return keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
 
 
 def run_sweep(sweep, output, overrides=None, *, jobs: int = 2, backend: str = "loky",

@@ -92,7 +92,7 @@ def run(scene, output, sets, force):
     from .scenes import SCENES
 
     cfg = C.load_scene(scene, _overrides(sets), SCENES)
-    from .runner import run_scene
+    from .runner import keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
     from .tabulate import classify_store
 
@@ -106,7 +106,7 @@ def run(scene, output, sets, force):
         click.echo("Compiling the kernel (once; numba caches it on disk) ...")
         click.echo(f"  ready in {compile_kernel():.1f} s")  # kept out of the run's own timing
         click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
-        result = run_scene(cfg)
+        result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
         store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
         table = classify_store(store)
     d = result.diagnostics
@@ -364,10 +364,10 @@ def movie(store_file, run_id, output, fps, height):
     from .analysis import twist_density
 
     h = result.history
-    rows = len(result.snapshot_positions)
-    phi_a = twist_density(result)[:rows] if "end_rotation" in h else None
+    rows = result.snapshot_history_rows
+    phi_a = twist_density(result)[rows] if "end_rotation" in h else None
     path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps,
-                   times=h["time"][:rows], twist_density=phi_a, height=height)
+                   times=h["time"][rows], twist_density=phi_a, height=height)
     click.echo(f"written {path}")
 
 

@@ -150,6 +150,15 @@ def interval(minimum: float, maximum: float, unit: str) -> Check:
 REQUIRED = object()
 positive = number(0.0, strict_min=True)
 
+def _snapshot_policy(path: str, value: Any):
+    if value in ("auto", "all", "final"):
+        return value
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 1:
+        return value
+    raise ConfigError(path, value, "auto, all, final, or every k-th history row as an "
+                      "integer k >= 1")
+
+
 class EngineDefault:
     """A schema default that is the engine's own: the default of a field of one of the
     dataclasses of rodphase.rod.model (Rod, Contact, Solver), so that a config and a Problem
@@ -259,6 +268,9 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "output": {
         "history_interval": (number(0, strict_min=True, unit="s"), _engine("Solver", "history_interval")),
         "topology": (boolean, True),
+        # which rod shapes a run keeps besides its final state: auto = all for `run`, the
+        # final one for sweeps (a sweep's runs are classified by their final shape)
+        "snapshots": (_snapshot_policy, "auto"),
     },
     # scene-specific sections: read only by the scenes that use them
     "pull": {

@@ -56,7 +56,8 @@ class RunResult:
     positions (n+1, 3), directors (n, 3, 3) with rows d1 d2 d3, radii (n,) current radii,
     rest_lengths (n,). history maps column name → (S,) array, with "stage" (index of the
     protocol stage) and, when computed, "link", "twist", "writhe" (turns). snapshot_positions
-    (S, n+1, 3) and snapshot_d1 (S, n, 3) are the rod at each history row.
+    (K, n+1, 3) and snapshot_d1 (K, n, 3) are the rod at the history rows `snapshot_rows`
+    (K,) (None: one snapshot per history row, K = S; see `snapshot_history_rows`).
     """
 
     status: str
@@ -73,10 +74,18 @@ class RunResult:
     # (positions, directors) at the end of each stage, for splitting a continuation run;
     # not stored
     stage_states: list = field(default_factory=list, repr=False)
+    snapshot_rows: np.ndarray | None = None  # history row of each snapshot; None: all rows
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    @property
+    def snapshot_history_rows(self) -> np.ndarray:
+        """(K,) the history row each snapshot was taken at."""
+        if self.snapshot_rows is not None:
+            return np.asarray(self.snapshot_rows, dtype=np.int64)
+        return np.arange(len(self.snapshot_positions), dtype=np.int64)
 
     @property
     def rest_radius(self) -> float:

@@ -99,6 +99,31 @@ def with_topology(result: RunResult, problem: Problem) -> RunResult:
     return result
 
 
+def keep_snapshots(result: RunResult, policy) -> RunResult:
+    """The result with only the snapshots `policy` keeps: "all", "final" (the last one), or
+    an integer k (every k-th history row and the last). Lk, Tw and Wr are computed from every
+    snapshot before this, so the history keeps them all; only the stored shapes thin out."""
+    count = len(result.snapshot_positions)
+    if policy == "all" or count == 0:
+        return result
+    rows = result.snapshot_history_rows
+    if policy == "final":
+        keep = np.array([count - 1])
+    else:
+        keep = np.unique(np.append(np.arange(0, count, int(policy)), count - 1))
+    result.snapshot_positions = result.snapshot_positions[keep]
+    result.snapshot_d1 = result.snapshot_d1[keep]
+    result.snapshot_rows = rows[keep]
+    return result
+
+
+def snapshot_policy(cfg, default: str):
+    """output.snapshots of a config, its "auto" resolved to `default` ("all" for a single
+    run, "final" for a sweep)."""
+    policy = cfg.output.snapshots
+    return default if policy == "auto" else policy
+
+
 def run(problem: Problem, *, max_steps: int | None = None, topology: bool = False) -> RunResult:
     """Simulate a Problem (see rodphase.rod.simulate) and, with `topology`, account for its
     link (see with_topology)."""

@@ -478,6 +478,8 @@ class Store:
                 snapshot_d1=g["snapshots/d1"][()],
                 diagnostics=json.loads(_plain(g.attrs["diagnostics"], f"{where} diagnostics")),
                 stage_ends=[int(i) for i in g.attrs["stage_ends"]],
+                # files before the snapshot policy kept one snapshot per history row
+                snapshot_rows=g["snapshots/rows"][()] if "rows" in g["snapshots"] else None,
             )
 
     def write_run(self, run_id: str, params: dict, result: RunResult, timings: dict) -> None:
@@ -661,7 +663,7 @@ ARRAY_UNITS = {"positions": "m", "directors": "1", "radii": "m", "rest_lengths":
 DIMENSIONS = {"positions": ("node", "xyz"), "directors": ("element", "director", "xyz"),
               "radii": ("element",), "rest_lengths": ("element",),
               "snapshots/positions": ("time", "node", "xyz"),
-              "snapshots/d1": ("time", "element", "xyz")}
+              "snapshots/d1": ("time", "element", "xyz"), "snapshots/rows": ("time",)}
 
 
 def _write_array(group: h5py.Group, name: str, data, *, units: str,
@@ -681,7 +683,7 @@ def _write_array(group: h5py.Group, name: str, data, *, units: str,
 def _name_dimensions(g: h5py.Group) -> None:
     """Attach the run group's dimension scales to its arrays (again, after a copy: the
     references are file addresses, and HDF5's copy does not re-point them)."""
-    labelled = [(g[name], dims) for name, dims in DIMENSIONS.items()]
+    labelled = [(g[name], dims) for name, dims in DIMENSIONS.items() if name in g]
     history = g["history"]
     labelled += [(history[name], ("time",)) for name in history if name != "time"]
     for ds, _ in labelled:
@@ -728,8 +730,10 @@ def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
         _write_array(history, "time", time, units="s")
     history["time"].make_scale("time")
     snapshots = g.create_group("snapshots")
-    _write_array(snapshots, "time", time[:len(result.snapshot_positions)],
+    rows = result.snapshot_history_rows
+    _write_array(snapshots, "time", time[rows] if len(time) else time[:0],
                  units="s").make_scale("time")
+    _write_array(snapshots, "rows", rows, units="1")  # the history row of each snapshot
     _write_array(snapshots, "positions", result.snapshot_positions, units="m", per_snapshot=True)
     _write_array(snapshots, "d1", result.snapshot_d1, units="1", per_snapshot=True)
     _name_dimensions(g)

@@ -28,7 +28,7 @@ from . import __version__
 from . import config as C
 from .result import RunResult
 from .rod.simulate import current_radii
-from .runner import compile_kernel, run_scene
+from .runner import compile_kernel, keep_snapshots, run_scene, snapshot_policy
 
 log = logging.getLogger(__name__)
 
@@ -118,10 +118,11 @@ def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
         except Exception:  # a bug, not a physical failure: keep the sweep going, record it
             error = traceback.format_exc(limit=4)
             return [(rid, p, None, error) for rid, p in zip(job.run_ids, job.params)]
+    policy = snapshot_policy(job.scene, "final")
     if job.twist_targets is None:
-        return [(job.run_ids[0], job.params[0], result, "")]
+        return [(job.run_ids[0], job.params[0], keep_snapshots(result, policy), "")]
     incompressible = job.scene["material"]["incompressible"]
-    return [(rid, p, split_continuation(result, k, incompressible), "")
+    return [(rid, p, keep_snapshots(split_continuation(result, k, incompressible), policy), "")
             for k, (rid, p) in enumerate(zip(job.run_ids, job.params))]
 
 

@@ -70,10 +70,13 @@ def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
     put in so far, writhe if computed, and the snapshot's alignment and phase."""
     d, h = result.diagnostics, result.history
     rest_length, radius = float(d["rest_length"]), float(d["rest_radius"])
-    rows = np.arange(0, len(h["time"]), max(int(every), 1))
+    # the history rows that have a snapshot (a run may keep only some), every `every`-th
+    kept = result.snapshot_history_rows
+    picks = np.arange(0, len(kept), max(int(every), 1))
+    rows = kept[picks]
     turned = rotation_put_in(h)
     values = [alignment(result.snapshot_positions[i], radius, rest_length=rest_length,
-                        epsilon=epsilon) for i in rows]
+                        epsilon=epsilon) for i in picks]
     table = pd.DataFrame({
         "time": h["time"][rows], "stage": h["stage"][rows],
         "extension": 1.0 + h["end_displacement"][rows] / rest_length,

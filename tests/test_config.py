@@ -358,8 +358,9 @@ def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
     from rodphase.result import RunResult
 
     _Tracked.read = set()
-    monkeypatch.setattr(C, "validate_scene",
-                        lambda raw, registered=None: _tracked(_VALIDATE(raw, registered)))
+    validated = []
+    monkeypatch.setattr(C, "validate_scene", lambda raw, registered=None: validated.append(
+        _tracked(_VALIDATE(raw, registered))) or validated[-1])
     # a run that reports itself under-resolved, so that the runner reads its refinement cap
     monkeypatch.setattr(rodphase.rod, "simulate", lambda problem, **kw: RunResult(
         "unstable", "", None, None, None, None, {}, np.zeros(0), np.zeros(0),
@@ -374,6 +375,8 @@ def test_every_schema_key_is_read_by_some_builder_or_the_runner(monkeypatch):
         for overrides in variants:
             raw = C.apply_overrides(C.read_yaml(path), overrides)
             runner.run_scene(raw)
+            # what the run's caller (sweep worker, `run`, the API) reads to store the result
+            runner.snapshot_policy(validated[-1], "all")
     every = {(section, key) for section, fields in C.SCENE_SCHEMA.items() for key in fields}
     assert every - _Tracked.read == set()
 

@@ -414,3 +414,23 @@ def test_a_store_that_xarray_holds_open_can_still_be_read_and_written(tmp_path):
         store.write_run("run-00004", {}, fake_result(), {})
     assert len(st.read_table(path)) == 5
     held.close()
+
+
+def test_a_snapshot_policy_keeps_the_rows_it_says_and_the_store_knows_which(tmp_path):
+    from rodphase.runner import keep_snapshots
+
+    full = fake_result(rows=7)
+    assert len(keep_snapshots(fake_result(rows=7), "all").snapshot_positions) == 7
+    final = keep_snapshots(fake_result(rows=7), "final")
+    np.testing.assert_array_equal(final.snapshot_positions, full.snapshot_positions[[6]])
+    every = keep_snapshots(fake_result(rows=7), 3)
+    assert list(every.snapshot_history_rows) == [0, 3, 6]
+    np.testing.assert_array_equal(every.snapshot_d1, full.snapshot_d1[[0, 3, 6]])
+    with open_(tmp_path / "s.h5") as store:
+        store.write_run("a", {}, every, {})
+    with st.read_store(tmp_path / "s.h5") as store:
+        back = store.read_run("a")
+    assert list(back.snapshot_history_rows) == [0, 3, 6]
+    assert len(back.history["time"]) == 7  # the history keeps every row
+    with h5py.File(tmp_path / "s.h5", "r") as f:
+        np.testing.assert_array_equal(f["runs/a/snapshots/time"][()], full.history["time"][[0, 3, 6]])

@@ -93,6 +93,12 @@ def test_sweep_classify_plot_end_to_end(tmp_path):
     assert result.exit_code == 2 and "error: --size" in result.output
     result = cli("export", out, "--run", table["run_id"][0], "-o", tmp_path / "rod.vtk")
     assert result.exit_code == 0 and (tmp_path / "rod.vtk").read_text().startswith("# vtk")
+    # a sweep keeps its runs' final shapes only (output.snapshots auto = final for sweeps);
+    # the history, Lk/Tw/Wr included, keeps every row
+    with read_store(out) as store:
+        run = store.read_run(table["run_id"][0])
+    assert len(run.snapshot_positions) == 1 and len(run.history["time"]) > 3
+    assert list(run.snapshot_history_rows) == [len(run.history["time"]) - 1]
     # the file is readable without rodphase
     with h5py.File(out, "r") as f:
         assert "config_yaml" in f.attrs and "config_hash" in f.attrs
