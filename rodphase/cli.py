@@ -277,7 +277,6 @@ def plot(store_file, kind, output, run_id, experiments, twist, background, size,
 
 def _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption):
     import pandas as pd
-    import yaml
 
     from . import plot as P
     from .store import read_store
@@ -290,8 +289,8 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
-            text = (P.sweep_caption(yaml.safe_load(store.attrs.get("config_yaml", "")) or {},
-                                    table) if caption else None)
+            text = (P.sweep_caption(C.stored_config(store.attrs.get("config_yaml", "")), table)
+                    if caption else None)
             P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size)
         elif kind == "path":
             from .tabulate import path_table

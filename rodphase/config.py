@@ -475,6 +475,17 @@ def _yaml(text: str):
     return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
 
 
+def stored_config(text: str) -> dict:
+    """The resolved config a store carries (its config_yaml attribute), read with the same
+    strict loader as config files (a file from elsewhere may hold an alias bomb); {} when it
+    is not a YAML mapping."""
+    try:
+        data = _yaml(text or "")
+    except yaml.YAMLError:
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def _short(text: str, limit: int = 60) -> str:
     text = " ".join(str(text).split())
     return text if len(text) <= limit else text[:limit] + "..."

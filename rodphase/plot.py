@@ -120,10 +120,13 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
     """One line saying what a phase map was computed with: the scene, the resolution, the
     rod and material, the load, the protocol, the sampler, and the runs by status. `config`
     is a store's resolved config (its config_yaml attribute, parsed)."""
-    scene = config.get("scene", {})
-    sweep = config.get("sweep", {})
-    rod, material = scene.get("rod", {}), scene.get("material", {})
-    loading, solver = scene.get("loading", {}), scene.get("solver", {})
+    def section(parent, name):  # a file from elsewhere may hold anything there
+        value = parent.get(name) if isinstance(parent, dict) else None
+        return value if isinstance(value, dict) else {}
+
+    scene, sweep = section(config, "scene"), section(config, "sweep")
+    rod, material = section(scene, "rod"), section(scene, "material")
+    loading, solver = section(scene, "loading"), section(scene, "solver")
     parts = [f"{scene.get('scene', '?')}: {rod.get('elements', '?')} elements",
              f"L0 {rod.get('length', float('nan')):g} m, a0 {rod.get('radius', float('nan')):g} m",
              f"E {material.get('youngs_modulus', float('nan')):.3g} Pa"

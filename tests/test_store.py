@@ -434,3 +434,31 @@ def test_a_snapshot_policy_keeps_the_rows_it_says_and_the_store_knows_which(tmp_
     assert len(back.history["time"]) == 7  # the history keeps every row
     with h5py.File(tmp_path / "s.h5", "r") as f:
         np.testing.assert_array_equal(f["runs/a/snapshots/time"][()], full.history["time"][[0, 3, 6]])
+
+
+def test_a_phase_map_of_a_single_run_file_is_one_error_line(tmp_path):
+    from click.testing import CliRunner
+
+    from rodphase.cli import main
+
+    path = tmp_path / "run.h5"
+    result = fake_result()
+    result.diagnostics.update(rest_length=1.0, youngs_modulus=1e6)
+    with st.open_store(path, config_text="scene: x\n", config_hash="h", version="0.1.0",
+                       kind="run") as store:
+        store.write_run("run", {}, result, {})
+    runner = CliRunner()
+    assert runner.invoke(main, ["classify", str(path)]).exit_code == 0
+    out = runner.invoke(main, ["plot", str(path), "--kind", "phase", "-o", str(tmp_path / "p.png")])
+    assert out.exit_code == 2 and out.output.startswith("error: --kind phase")
+    assert "extension" in out.output and "Traceback" not in out.output
+
+
+def test_a_stored_config_with_an_alias_bomb_is_not_expanded():
+    from rodphase import config as C
+
+    bomb = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]\n"
+        for p, c in zip("abcdefgh", "bcdefghi"))
+    assert C.stored_config(bomb) == {}  # the caption then says what it can, nothing hangs
+    assert C.stored_config("scene: {scene: twist_under_load}")["scene"]["scene"] == "twist_under_load"
