@@ -993,28 +993,22 @@ def _bad_input(lab: Lab, case: str, cmd_args: list, names: tuple, out: Path | No
     return [o]
 
 
-def case_bad_scheduler(lab: Lab) -> list[Outcome]:
-    d = lab.fresh("bad-scheduler")
-    out = d / "out.h5"
-    return _bad_input(lab, "bad-scheduler-address",
-                      ["sweep", lab.cfg, "-o", out, "--quiet", "--backend", "dask",
-                       "--scheduler", "not-an-address"], ("scheduler", "not-an-address"), out)
+# sweep arguments that must be refused before anything runs, and the words its one error
+# line must name, per bad-input row
+SWEEP_BAD_INPUT = {
+    "bad-scheduler-address": (["--backend", "dask", "--scheduler", "not-an-address"],
+                              ("scheduler", "not-an-address")),
+    "unreachable-scheduler": (["--backend", "dask", "--scheduler", "tcp://127.0.0.1:9"],
+                              ("scheduler", "127.0.0.1:9")),
+    "set-overridden-by-axis": (["--jobs", 1, "--set", "loading.twist_density=1.0"],
+                               ("twist_density",)),
+}
 
 
-def case_unreachable_scheduler(lab: Lab) -> list[Outcome]:
-    d = lab.fresh("unreachable-scheduler")
-    out = d / "out.h5"
-    return _bad_input(lab, "unreachable-scheduler",
-                      ["sweep", lab.cfg, "-o", out, "--quiet", "--backend", "dask",
-                       "--scheduler", "tcp://127.0.0.1:9"], ("scheduler", "127.0.0.1:9"), out)
-
-
-def case_set_overridden(lab: Lab) -> list[Outcome]:
-    d = lab.fresh("set-overridden")
-    out = d / "out.h5"
-    return _bad_input(lab, "set-overridden-by-axis",
-                      ["sweep", lab.cfg, "-o", out, "--quiet", "--jobs", 1,
-                       "--set", "loading.twist_density=1.0"], ("twist_density",), out)
+def case_sweep_bad_input(lab: Lab, case_id: str) -> list[Outcome]:
+    extra, words = SWEEP_BAD_INPUT[case_id]
+    out = lab.fresh(case_id) / "out.h5"
+    return _bad_input(lab, case_id, ["sweep", lab.cfg, "-o", out, "--quiet", *extra], words, out)
 
 
 def case_run_unwritable(lab: Lab) -> list[Outcome]:
@@ -1182,9 +1176,8 @@ def cases(kills: int = 60, repeats: int = 1, memory_samples: int = MEMORY_SAMPLE
         "second-writer": lambda lab: case_second_writer(lab, locking=True),
         "second-writer-no-hdf5-locking": lambda lab: case_second_writer(lab, locking=False),
         "reader-during-sweep": case_reader_during_sweep,
-        "bad-scheduler-address": case_bad_scheduler,
-        "unreachable-scheduler": case_unreachable_scheduler,
-        "set-overridden-by-axis": case_set_overridden,
+        **{case_id: (lambda c: lambda lab: case_sweep_bad_input(lab, c))(case_id)
+           for case_id in SWEEP_BAD_INPUT},
         "run-unwritable-output": case_run_unwritable,
         "force-same-config-keeps-runs": case_force_same_config,
     }
