@@ -153,8 +153,6 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
     from .sweep import run_sweep
 
     sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
-    if scheduler and backend != "dask":
-        raise C.ConfigError("--scheduler", scheduler, "only with --backend dask")
     _make_parent(output)
     report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
                        scheduler=scheduler, retry_failed=retry_failed, replace=force,

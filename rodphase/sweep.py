@@ -241,6 +241,7 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
     With replace=True a store of another config is replaced, once the first run is stored."""
     from .store import open_store
 
+    _check_backend(backend, scheduler)  # before the store is made or anything compiled
     text = C.to_yaml(sweep=sweep, scene=scene)
     digest = C.config_hash(sweep, scene)
     report = SweepReport(0, 0, 0, 0, 0.0, [])
@@ -427,14 +428,7 @@ def _worker_start(parent_pid: int) -> None:
 
 @contextmanager
 def _pool(backend: str, scheduler: str | None, jobs: int) -> Iterator:
-    if backend == "loky":
-        if scheduler:
-            raise C.ConfigError("--scheduler", scheduler, "only with --backend dask")
-        pool = _LocalPool(jobs)
-    elif backend == "dask":
-        pool = _dask_pool(scheduler, jobs)
-    else:
-        raise C.ConfigError("--backend", backend, "loky or dask")
+    pool = _LocalPool(jobs) if backend == "loky" else _dask_pool(scheduler, jobs)
     clean = False
     try:
         yield pool
@@ -448,6 +442,17 @@ SCHEDULER_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx|inproc)://)?[\w.\-]+:
 SCHEDULER_TIMEOUT = 10  # s to reach a Dask scheduler before saying it cannot be reached
 
 
+def _check_backend(backend: str, scheduler: str | None) -> None:
+    """The backend and scheduler as given, checked without contacting anything."""
+    if backend not in ("loky", "dask"):
+        raise C.ConfigError("--backend", backend, "loky or dask")
+    if scheduler and backend != "dask":
+        raise C.ConfigError("--scheduler", scheduler, "only with --backend dask")
+    if scheduler and not SCHEDULER_ADDRESS.match(scheduler):
+        raise C.ConfigError("--scheduler", scheduler,
+                            "a Dask scheduler address such as tcp://host:8786")
+
+
 def _dask_pool(scheduler: str | None, jobs: int) -> _DaskPool:
     try:
         from dask.distributed import Client, LocalCluster
@@ -455,9 +460,6 @@ def _dask_pool(scheduler: str | None, jobs: int) -> _DaskPool:
         raise C.ConfigError("--backend", "dask",
                             "installed first: pip install 'rodphase[dask]'") from None
     if scheduler:
-        if not SCHEDULER_ADDRESS.match(scheduler):
-            raise C.ConfigError("--scheduler", scheduler,
-                                "a Dask scheduler address such as tcp://host:8786")
         try:
             client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
         except (OSError, TimeoutError) as exc:
