@@ -253,7 +253,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "quadratic_drag": (number(0, unit="1/m: extra drag rate per unit speed"),
                            _engine("Solver", "quadratic_drag")),
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
-        "hold_tolerance": (number(0, 1, strict_min=True), _engine("Solver", "tolerance")),
+        "hold_tolerance": (number(0, 1, strict_min=True), _engine("Solver", "hold_tolerance")),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
         # a hold also ends once the window-mean shape moves < hold_tolerance × L0 per window
         "settle_window": (number(0, unit="s; 0 = residual test only"),

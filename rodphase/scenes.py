@@ -43,7 +43,7 @@ def solver_from(cfg) -> Solver:
     s = cfg.solver
     return Solver(dt=None if s.dt == "auto" else s.dt, safety=s.safety, damping=s.damping,
                   rotational_damping=None if s.rotational_damping == "auto" else s.rotational_damping,
-                  history_interval=cfg.output.history_interval, tolerance=s.hold_tolerance,
+                  history_interval=cfg.output.history_interval, hold_tolerance=s.hold_tolerance,
                   quadratic_drag=s.quadratic_drag, settle_window=s.settle_window,
                   stability_probe=s.stability_probe, probe_size=s.probe_size,
                   probe_seed=cfg.rod.seed)

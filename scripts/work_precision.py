@@ -93,7 +93,7 @@ def stretch(n: int, safety: float, tolerance: float = 1e-6, fraction: float = 0.
     force = fraction * rod.youngs_modulus * rod.area
     problem = Problem(rod=rod, state=straight_state(rod),
                       controls=Controls(end_force=ramp(0, 0.2, 0, force)),
-                      solver=Solver(damping=40.0, tolerance=tolerance, safety=safety,
+                      solver=Solver(damping=40.0, hold_tolerance=tolerance, safety=safety,
                                     history_interval=1.0),
                       stages=(Stage(10.0, until_equilibrium=True),))
     load = load_text()
@@ -111,7 +111,7 @@ def cantilever(n: int, safety: float) -> dict:
     load_n = 3e-3 * bending
     problem = Problem(rod=rod, state=straight_state(rod),
                       controls=Controls(end_force=constant(load_n), force_direction=(1, 0, 0)),
-                      solver=Solver(damping=1.2, tolerance=1e-7, safety=safety,
+                      solver=Solver(damping=1.2, hold_tolerance=1e-7, safety=safety,
                                     history_interval=10.0),
                       stages=(Stage(100.0, until_equilibrium=True),))
     load = load_text()

@@ -319,7 +319,7 @@ def test_one_set_of_defaults_the_engines():
                 expected = {f.name: f.default for f in dataclasses.fields(
                     {"Rod": Rod, "Solver": Solver, "Contact": Contact}[default.cls])}[default.field]
                 assert bare[section][key] == ("auto" if expected is None else expected), key
-    for name in ("quadratic_drag", "tolerance", "history_interval", "settle_window", "safety",
+    for name in ("quadratic_drag", "hold_tolerance", "history_interval", "settle_window", "safety",
                  "damping", "stability_probe", "probe_size"):
         assert getattr(problem.solver, name) == getattr(engine["Solver"], name), name
     for name in ("stiffness", "damping_ratio", "exclusion", "skin", "near_skin",

@@ -62,7 +62,7 @@ def test_static_stretch_of_an_incompressible_rod():
         force = fraction * rod.youngs_modulus * rod.area
         problem = Problem(rod=rod, state=straight_state(rod),
                           controls=Controls(end_force=ramp(0, 0.2, 0, force)),
-                          solver=Solver(damping=40.0, tolerance=1e-6))
+                          solver=Solver(damping=40.0, hold_tolerance=1e-6))
         result = relax(problem, 10.0)
         assert result.ok, result.message
         expected = 1.0 / (1.0 - fraction)
@@ -79,7 +79,7 @@ def cantilever_tip(n):
     load = 3e-3 * bending  # tip deflection 1e-3 L: geometric nonlinearity ~1e-6, negligible
     problem = Problem(rod=rod, state=straight_state(rod),
                       controls=Controls(end_force=constant(load), force_direction=(1, 0, 0)),
-                      solver=Solver(damping=1.2, tolerance=1e-7, history_interval=10.0))
+                      solver=Solver(damping=1.2, hold_tolerance=1e-7, history_interval=10.0))
     result = relax(problem, 100.0)
     assert result.ok, result.message
     shear = 4 * rod.shear_modulus * rod.area / 3
@@ -155,7 +155,7 @@ def _greenhill_hold(fraction, probe):
     state.x[2] *= stretch
     problem = Problem(rod=rod, state=state, ends=Ends(end_held=(True, True, False), end_frame_held=True),
                       controls=Controls(end_force=constant(tension)),
-                      solver=Solver(damping=20.0, tolerance=1e-3, history_interval=0.1,
+                      solver=Solver(damping=20.0, hold_tolerance=1e-3, history_interval=0.1,
                                     stability_probe=probe),
                       stages=(Stage(30.0, until_equilibrium=True),))
     result = simulate(problem)
@@ -200,7 +200,7 @@ def test_prescribed_end_rotation_is_applied_exactly():
                           ends=Ends(end_held=(True, True, False), end_frame_held=True),
                           controls=Controls(end_force=constant(force),
                                             end_rotation=ramp(0, 1.0, 0, 2 * math.pi * turns)),
-                          solver=Solver(damping=damping, tolerance=1e-6, history_interval=0.05),
+                          solver=Solver(damping=damping, hold_tolerance=1e-6, history_interval=0.05),
                           stages=(Stage(1.0), Stage(30.0, until_equilibrium=True)))
         result = simulate(problem)
         assert result.ok, result.message
@@ -405,7 +405,7 @@ def test_segments_pushed_together_do_not_interpenetrate():
     problem = Problem(rod=rod, state=state, contact=Contact(enabled=True),
                       controls=Controls(end_force=constant(push), force_direction=(-1, 0, 0)),
                       rest_curvature=measured_curvature(directors, np.full(n, rod.length / n)),
-                      solver=Solver(damping=20.0, tolerance=1e-4, history_interval=0.05),
+                      solver=Solver(damping=20.0, hold_tolerance=1e-4, history_interval=0.05),
                       stages=(Stage(10.0, until_equilibrium=True),))
     result = simulate(problem)
     assert result.status in ("ok", "not_converged"), result.message
@@ -491,7 +491,7 @@ def test_prescribed_end_displacement_records_the_reaction_force():
     pull = 0.1
     problem = Problem(rod=rod, state=straight_state(rod), ends=Ends(end_held=(True, True, True)),
                       controls=Controls(end_displacement=ramp(0, 0.5, 0, pull)),
-                      solver=Solver(damping=40.0, tolerance=1e-6),
+                      solver=Solver(damping=40.0, hold_tolerance=1e-6),
                       stages=(Stage(0.5), Stage(10.0, until_equilibrium=True)))
     result = simulate(problem)
     assert result.ok, result.message
@@ -508,7 +508,7 @@ def test_modulus_ramp_shortens_a_loaded_rod_as_the_law_says():
     force = 0.2 * rod.youngs_modulus * rod.area
     problem = Problem(rod=rod, state=straight_state(rod),
                       controls=Controls(end_force=constant(force), stiffness=ramp(0, 1.0, 1.0, 2.0)),
-                      solver=Solver(damping=40.0, tolerance=1e-6),
+                      solver=Solver(damping=40.0, hold_tolerance=1e-6),
                       stages=(Stage(1.0), Stage(10.0, until_equilibrium=True)))
     result = simulate(problem)
     assert result.ok, result.message
@@ -531,7 +531,7 @@ def test_radius_growth_keeps_a_times_rest_twist():
     problem = Problem(rod=rod, state=straight_state(rod),
                       ends=Ends(start_held=(True, True, True), start_frame_held=True),
                       controls=Controls(radius=ramp(0, 1.0, 1.0, 2.0)),
-                      solver=Solver(damping=40.0, tolerance=1e-7),
+                      solver=Solver(damping=40.0, hold_tolerance=1e-7),
                       stages=(Stage(1.0), Stage(20.0, until_equilibrium=True)))
     result = simulate(problem)
     assert result.ok, result.message
@@ -561,7 +561,7 @@ def test_a_slow_oscillation_is_not_taken_for_a_settled_shape():
     # is not at rest, and the spread within the window must keep the hold going.
     rod = Rod(length=0.2, radius=0.01, elements=10)
     load = 3 * rod.bending_stiffness * 0.01 / rod.length**3  # static tip deflection ≈ 1 cm
-    solver = Solver(damping=0.02, rotational_damping=0.02, tolerance=1e-3, history_interval=1e-3)
+    solver = Solver(damping=0.02, rotational_damping=0.02, hold_tolerance=1e-3, history_interval=1e-3)
 
     def swing(stage, **settle):
         problem = Problem(rod=rod, state=straight_state(rod),
@@ -575,8 +575,8 @@ def test_a_slow_oscillation_is_not_taken_for_a_settled_shape():
     up = np.where((tip[:-1] < tip.mean()) & (tip[1:] >= tip.mean()))[0]
     period = float(np.mean(np.diff(t[up])))
     windows = [tip[(t >= a) & (t < a + period)].mean() for a in t[up[:4]]]
-    assert np.ptp(windows) < 0.2 * solver.tolerance * rod.length  # means agree: premise
-    assert np.std(tip) > 10 * solver.tolerance * rod.length  # yet it swings
+    assert np.ptp(windows) < 0.2 * solver.hold_tolerance * rod.length  # means agree: premise
+    assert np.std(tip) > 10 * solver.hold_tolerance * rod.length  # yet it swings
     held = swing(Stage(3.0, until_equilibrium=True), settle_window=period)
     assert held.status == "not_converged"
     assert not held.diagnostics["stages"][0]["settled"]
@@ -590,7 +590,7 @@ def test_local_rest_twist_over_a_segment():
     problem = Problem(rod=rod, state=straight_state(rod),
                       ends=Ends(start_held=(True, True, True), start_frame_held=True),
                       controls=Controls(local_twist=constant(extra), segment=(5, 15)),
-                      solver=Solver(damping=40.0, tolerance=1e-7),
+                      solver=Solver(damping=40.0, hold_tolerance=1e-7),
                       stages=(Stage(20.0, until_equilibrium=True),))
     result = simulate(problem)
     assert result.ok, result.message
@@ -608,7 +608,7 @@ def test_intrinsic_curvature_relaxes_to_a_circular_arc():
     rod = Rod(length=1.0, radius=0.01, elements=40, rest_curvature=(k1, 0.0, 0.0))
     problem = Problem(rod=rod, state=straight_state(rod),
                       ends=Ends(start_held=(True, True, True), start_frame_held=True),
-                      solver=Solver(damping=1.2, tolerance=1e-6),  # ~critical for the first mode
+                      solver=Solver(damping=1.2, hold_tolerance=1e-6),  # ~critical for the first mode
                       stages=(Stage(60.0, until_equilibrium=True),))
     result = simulate(problem)
     assert result.ok, result.message
@@ -656,7 +656,7 @@ def test_a_hold_that_runs_out_of_time_says_which_test_failed_and_by_how_much():
     state = straight_state(rod)
     state.x[0] += 0.02 * np.sin(np.pi * np.linspace(0, 1, 11))
     problem = Problem(rod=rod, state=state, ends=Ends(end_held=(True, True, True)),
-                      solver=Solver(tolerance=1e-6, settle_window=0.02),
+                      solver=Solver(hold_tolerance=1e-6, settle_window=0.02),
                       stages=(Stage(0.01, until_equilibrium=True, label="hold"),))
     result = simulate(problem)
     assert result.status == "not_converged"

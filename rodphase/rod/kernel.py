@@ -98,7 +98,7 @@ Settings = namedtuple("Settings", [
     "check_every",  # int: steps between guard and equilibrium checks
     "stop_at_equilibrium",  # bool
     "equilibrium_after",  # s: no equilibrium stop before this time (controls still moving)
-    "tolerance",  # residual force / force scale, and (squared) kinetic energy / (force scale × L0)
+    "hold_tolerance",  # residual force / force scale, and (squared) kinetic energy / (force scale × L0)
     "force_scale",  # N
     "length_scale",  # m
     "settle_window",  # s: window over which the mean shape is compared (0: residual test only)
@@ -973,7 +973,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
     penetration_limit = settings.penetration_limit
     speed_limit = settings.speed_limit
-    tolerance = settings.tolerance
+    tolerance = settings.hold_tolerance
     force_scale = settings.force_scale
     length_scale = settings.length_scale
     equilibrium_after = settings.equilibrium_after

@@ -201,9 +201,9 @@ class Solver:
     quadratic_drag: float = 0.0
     history_interval: float = 0.05  # s between history rows
     check_interval: int = 50  # steps between guard and equilibrium checks
-    tolerance: float = 1e-4  # equilibrium: residual force / force scale
+    hold_tolerance: float = 1e-4  # equilibrium: residual force / force scale
     # s; > 0 also ends a hold once the shape, averaged over consecutive windows this long,
-    # has moved by less than tolerance × settle_scale [m] at every surface point between them
+    # has moved by less than hold_tolerance × settle_scale [m] at every surface point between them
     settle_window: float = 0.0
     settle_scale: float | None = None  # m; None = the rod's rest length (as the kinetic test)
     speed_limit: float | None = None  # m/s; None = the axial wave speed

@@ -137,11 +137,11 @@ def _kernel_inputs(problem: Problem, ends: Ends, dt: float, history_every: int,
         check_every=int(solver.check_interval),
         stop_at_equilibrium=bool(until_equilibrium),
         equilibrium_after=float(equilibrium_after),
-        tolerance=float(solver.tolerance),
+        hold_tolerance=float(solver.hold_tolerance),
         force_scale=float(force_scale(problem)),
         length_scale=float(rod.length),
         settle_window=float(solver.settle_window),
-        settle_distance=float(solver.tolerance * scale),
+        settle_distance=float(solver.hold_tolerance * scale),
         probe=bool(solver.stability_probe),
         probe_size=float(solver.probe_size * rod.radius),
         probe_return=float(solver.probe_return),
@@ -195,7 +195,7 @@ def _stage_entry(stage, label: str, steps: int, end_time: float, code: int,
 
 def _unmet_criteria(solver, settings, info) -> str:
     """Which of the hold's equilibrium tests failed at its end, each with value and threshold."""
-    tol = solver.tolerance
+    tol = solver.hold_tolerance
     failed = []
     residual, kinetic = info[k.D_RESIDUAL], info[k.D_KINETIC]
     if residual >= tol:
@@ -282,9 +282,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
     """Advance `problem.state` through `problem.stages` and return a RunResult.
 
     A stage with `until_equilibrium` ends early once the largest free nodal force (and
-    torque per element length) is below solver.tolerance × force scale and the kinetic
-    energy below tolerance² × force scale × L0, or (with solver.settle_window > 0) once the
-    shape averaged over a window has moved by less than tolerance × L0 since the previous
+    torque per element length) is below solver.hold_tolerance × force scale and the kinetic
+    energy below hold_tolerance² × force scale × L0, or (with solver.settle_window > 0) once the
+    shape averaged over a window has moved by less than hold_tolerance × L0 since the previous
     window (the stage report says `settled`); if it never gets there the run's status is
     `not_converged`. A guard (non-finite state, runaway velocity, penetration) stops the
     run with status `unstable` and a message saying when, where, and what to change.
