@@ -159,30 +159,57 @@ def _snapshot_policy(path: str, value: Any):
                       "integer k >= 1")
 
 
+def _engine_field(cls: str, name: str):
+    """The dataclasses.Field of rodphase.rod.model.<cls>.<name> (importing the engine loads
+    numba, so this runs when a scene is validated, not when the CLI starts)."""
+    import dataclasses
+
+    from .rod import model
+
+    return {f.name: f for f in dataclasses.fields(getattr(model, cls))}[name]
+
+
 class EngineDefault:
     """A schema default that is the engine's own: the default of a field of one of the
     dataclasses of rodphase.rod.model (Rod, Contact, Solver), so that a config and a Problem
-    built in Python without that key mean the same thing. None there is "auto" here.
-    Resolved when a scene is validated (importing the engine loads numba)."""
+    built in Python without that key mean the same thing. None there is "auto" here."""
 
     def __init__(self, cls: str, field: str):
         self.cls, self.field = cls, field
 
     def value(self):
-        import dataclasses
-
-        from .rod import model
-
-        default = {f.name: f.default for f in dataclasses.fields(getattr(model, self.cls))}[
-            self.field]
+        default = _engine_field(self.cls, self.field).default
         return "auto" if default is None else default
 
     def __repr__(self) -> str:
         return f"{self.cls}.{self.field}"
 
 
-def _engine(cls: str, field: str) -> EngineDefault:
-    return EngineDefault(cls, field)
+class EngineCheck:
+    """The check of an engine field, built from its `model.setting` metadata (unit, bounds):
+    true/false for a bool field, a number in the field's range otherwise, "auto" too where
+    the engine's default is None (derived)."""
+
+    def __init__(self, cls: str, field: str):
+        self.cls, self.field = cls, field
+        self._check: Check | None = None
+
+    def __call__(self, path: str, value: Any):
+        if self._check is None:
+            spec = _engine_field(self.cls, self.field)
+            meta = spec.metadata
+            if isinstance(spec.default, bool):
+                self._check = boolean
+            else:
+                check = number(meta["minimum"], meta["maximum"], strict_min=meta["strict_min"],
+                               unit=meta["unit"])
+                self._check = auto_or(check) if spec.default is None else check
+        return self._check(path, value)
+
+
+def _engine(cls: str, field: str) -> tuple[Check, EngineDefault]:
+    """A schema entry whose check and default are the engine field's own."""
+    return EngineCheck(cls, field), EngineDefault(cls, field)
 
 
 SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
@@ -190,14 +217,14 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "length": (number(0, strict_min=True, unit="m"), 1.0),
         "radius": (number(0, strict_min=True, unit="m"), 0.025),
         "elements": (number(4, 5000, integer=True), 100),
-        "density": (number(0, strict_min=True, unit="kg/m^3"), _engine("Rod", "density")),
+        "density": _engine("Rod", "density"),
         "imperfection": (number(0, 1, unit="rest curvature x L0 (RMS, random)"), 1e-3),
         "seed": (number(0, integer=True), 0),
     },
     "material": {
-        "youngs_modulus": (number(0, strict_min=True, unit="Pa"), _engine("Rod", "youngs_modulus")),
-        "shear_modulus": (auto_or(number(0, strict_min=True, unit="Pa")), "auto"),
-        "incompressible": (boolean, _engine("Rod", "incompressible")),
+        "youngs_modulus": _engine("Rod", "youngs_modulus"),
+        "shear_modulus": _engine("Rod", "shear_modulus"),
+        "incompressible": _engine("Rod", "incompressible"),
         # given directly instead of from E, G and the radius (null: derived), for rods that
         # are not solid isotropic cylinders; the radius then sets only mass, inertia, contact
         "bend_stiffness": (number(0, strict_min=True, unit="N m^2 (B = EI)", nullable=True), None),
@@ -231,42 +258,37 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     },
     "physics": {
         "self_contact": (boolean, True),
-        "friction": (number(0, 5), _engine("Contact", "friction")),
+        "friction": _engine("Contact", "friction"),
         "gravity": (vector3, (0.0, 0.0, 0.0)),
     },
     "contact": {
-        "stiffness": (number(0, strict_min=True, unit="E per unit overlap per unit length"),
-                      _engine("Contact", "stiffness")),
-        "damping_ratio": (number(0, 10), _engine("Contact", "damping_ratio")),
-        "exclusion": (number(0, strict_min=True, unit="rest radii of arc length"),
-                      _engine("Contact", "exclusion")),
-        "skin": (number(0, strict_min=True, unit="rest radii"), _engine("Contact", "skin")),
-        "near_skin": (number(0, strict_min=True, unit="rest radii"), _engine("Contact", "near_skin")),
-        "penetration_limit": (number(0, 2, strict_min=True, unit="overlap / radius"),
-                              _engine("Contact", "penetration_limit")),
+        "stiffness": _engine("Contact", "stiffness"),
+        "damping_ratio": _engine("Contact", "damping_ratio"),
+        "exclusion": _engine("Contact", "exclusion"),
+        "skin": _engine("Contact", "skin"),
+        "near_skin": _engine("Contact", "near_skin"),
+        "penetration_limit": _engine("Contact", "penetration_limit"),
     },
     "solver": {
-        "dt": (auto_or(number(0, strict_min=True, unit="s")), _engine("Solver", "dt")),
-        "safety": (number(0, 1, strict_min=True), _engine("Solver", "safety")),
-        "damping": (number(0, unit="1/s"), _engine("Solver", "damping")),
-        "rotational_damping": (auto_or(number(0, unit="1/s")), _engine("Solver", "rotational_damping")),
-        "quadratic_drag": (number(0, unit="1/m: extra drag rate per unit speed"),
-                           _engine("Solver", "quadratic_drag")),
+        "dt": _engine("Solver", "dt"),
+        "safety": _engine("Solver", "safety"),
+        "damping": _engine("Solver", "damping"),
+        "rotational_damping": _engine("Solver", "rotational_damping"),
+        "quadratic_drag": _engine("Solver", "quadratic_drag"),
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
-        "hold_tolerance": (number(0, 1, strict_min=True), _engine("Solver", "hold_tolerance")),
+        "hold_tolerance": _engine("Solver", "hold_tolerance"),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
         # a hold also ends once the window-mean shape moves < hold_tolerance × L0 per window
-        "settle_window": (number(0, unit="s; 0 = residual test only"),
-                          _engine("Solver", "settle_window")),
+        "settle_window": _engine("Solver", "settle_window"),
         "max_steps": (number(1, integer=True, nullable=True), None),
         # a run stopped as under-resolved is run again with twice the elements, up to this
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
         # a hold ends only at an equilibrium that survives a perturbation of this size
-        "stability_probe": (boolean, _engine("Solver", "stability_probe")),
-        "probe_size": (number(0, 1, strict_min=True, unit="rest radii"), _engine("Solver", "probe_size")),
+        "stability_probe": _engine("Solver", "stability_probe"),
+        "probe_size": _engine("Solver", "probe_size"),
     },
     "output": {
-        "history_interval": (number(0, strict_min=True, unit="s"), _engine("Solver", "history_interval")),
+        "history_interval": _engine("Solver", "history_interval"),
         "topology": (boolean, True),
         # which rod shapes a run keeps besides its final state: auto = all for `run`, the
         # final one for sweeps (a sweep's runs are classified by their final shape)

@@ -1,6 +1,7 @@
 """Config validation: every broken input names its key, exits 2, and shows no traceback."""
 
 import math
+import re
 
 import pytest
 import yaml
@@ -325,6 +326,40 @@ def test_one_set_of_defaults_the_engines():
     for name in ("stiffness", "damping_ratio", "exclusion", "skin", "near_skin",
                  "penetration_limit", "friction"):
         assert getattr(problem.contact, name) == getattr(engine["Contact"], name), name
+
+
+def test_engine_keys_are_checked_by_the_engine_fields_own_range():
+    """A key backed by an engine field takes its unit and bounds from that field's
+    `model.setting` metadata: the default passes, a value just outside either bound is
+    refused naming the key, and the unit appears in what is allowed."""
+    import dataclasses
+
+    from rodphase.rod import model
+
+    engine_keys = 0
+    for section, fields in C.SCENE_SCHEMA.items():
+        for key, (check, default) in fields.items():
+            if not isinstance(check, C.EngineCheck):
+                continue
+            engine_keys += 1
+            path = f"{section}.{key}"
+            spec = {f.name: f for f in dataclasses.fields(getattr(model, check.cls))}[check.field]
+            meta = spec.metadata
+            assert check(path, default.value()) == default.value()
+            if isinstance(spec.default, bool):
+                with pytest.raises(C.ConfigError, match="true or false"):
+                    check(path, 1)
+                continue
+            if spec.default is None:
+                assert check(path, "auto") == "auto"
+            if meta["minimum"] is not None:
+                below = meta["minimum"] if meta["strict_min"] else meta["minimum"] - 1e-9
+                with pytest.raises(C.ConfigError, match=rf"{path}: .*{re.escape(meta['unit'])}"):
+                    check(path, below)
+            if meta["maximum"] is not None:
+                with pytest.raises(C.ConfigError, match=path):
+                    check(path, meta["maximum"] * 1.001 + 1e-9)
+    assert engine_keys >= 20  # every solver/contact key and the rod's material is the engine's
 
 
 class _Tracked(C.Frozen):

@@ -15,6 +15,18 @@ import numpy as np
 Table = tuple[tuple[float, ...], tuple[float, ...]]  # (times [s], values): piecewise linear
 
 
+def setting(default, unit: str = "", *, minimum: float | None = None,
+            maximum: float | None = None, strict_min: bool = False):
+    """A field a config may set: its default, unit and allowed range in one place.
+
+    rodphase.config builds the schema's check for the field from this metadata (a bool
+    default is true/false, a None default also accepts "auto"), so the engine and the
+    config cannot disagree on a default, a unit or a bound.
+    """
+    return field(default=default, metadata={"unit": unit, "minimum": minimum,
+                                            "maximum": maximum, "strict_min": strict_min})
+
+
 def constant(value: float) -> Table:
     return ((0.0,), (float(value),))
 
@@ -39,11 +51,12 @@ class Rod:
     length: float  # m, rest length L0
     radius: float  # m, rest radius a0
     elements: int
-    density: float = 1000.0  # kg/m³
-    youngs_modulus: float = 1.0e6  # Pa
-    shear_modulus: float | None = None  # Pa; None = the paper's G = 2E/3 of this E
+    density: float = setting(1000.0, "kg/m^3", minimum=0.0, strict_min=True)
+    youngs_modulus: float = setting(1.0e6, "Pa", minimum=0.0, strict_min=True)
+    # None = the paper's G = 2E/3 of this E
+    shear_modulus: float | None = setting(None, "Pa", minimum=0.0, strict_min=True)
     rest_curvature: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    incompressible: bool = True
+    incompressible: bool = setting(True)
     # Stiffnesses given directly (None: from E, G and the radius), for rods that are not
     # solid isotropic cylinders (e.g. the helical buckling benchmark's B, C, S): bending
     # B = EI [N m²], twist C = GJ [N m²], shear 4GA/3 [N], axial EA [N]. The radius then only
@@ -150,16 +163,8 @@ class Controls:
     def tables(self) -> list[Table]:
         from . import kernel as k
 
-        out: list[Table] = [constant(0.0)] * k.N_TABLES
-        out[k.T_END_ROTATION] = self.end_rotation
-        out[k.T_START_ROTATION] = self.start_rotation
-        out[k.T_END_FORCE] = self.end_force
-        out[k.T_END_DISPLACEMENT] = self.end_displacement
-        out[k.T_STIFFNESS] = self.stiffness
-        out[k.T_RADIUS] = self.radius
-        out[k.T_LOCAL_TWIST] = self.local_twist
-        out[k.T_LOCAL_PULL] = self.local_pull
-        return out
+        # in the kernel's row order, by name (CONTROL_TABLES)
+        return [getattr(self, name) for name in k.CONTROL_TABLE_NAMES]
 
 
 @dataclass(frozen=True)
@@ -173,46 +178,54 @@ class Contact:
     """
 
     enabled: bool = False
-    stiffness: float = 10.0
-    damping_ratio: float = 0.5
-    friction: float = 0.0
+    stiffness: float = setting(10.0, "E per unit overlap per unit length", minimum=0.0,
+                               strict_min=True)
+    damping_ratio: float = setting(0.5, minimum=0.0, maximum=10.0)
+    friction: float = setting(0.0, minimum=0.0, maximum=5.0)
     slip_speed: float = 1e-4  # m/s, below it friction is viscous (regularised Coulomb)
-    exclusion: float = math.pi  # rest radii of arc length
-    skin: float = 0.5  # rest radii; the Verlet-list margin
-    near_skin: float = 0.01  # rest radii; the margin of the short list the force loop runs over
-    penetration_limit: float = 0.5  # overlap / radius beyond which the run is unstable
+    exclusion: float = setting(math.pi, "rest radii of arc length", minimum=0.0, strict_min=True)
+    # the Verlet-list margin
+    skin: float = setting(0.5, "rest radii", minimum=0.0, strict_min=True)
+    # the margin of the short list the force loop runs over
+    near_skin: float = setting(0.01, "rest radii", minimum=0.0, strict_min=True)
+    # beyond this overlap the run is unstable
+    penetration_limit: float = setting(0.5, "overlap / radius", minimum=0.0, maximum=2.0,
+                                       strict_min=True)
 
 
 @dataclass(frozen=True)
 class Solver:
     """Time stepping. dt=None derives it from the stiffest mode with the safety factor."""
 
-    dt: float | None = None
-    safety: float = 0.5
-    damping: float = 20.0  # 1/s; velocities decay as exp(-damping·t) without forces
+    dt: float | None = setting(None, "s", minimum=0.0, strict_min=True)
+    safety: float = setting(0.5, minimum=0.0, maximum=1.0, strict_min=True)
+    # velocities decay as exp(-damping·t) without forces
+    damping: float = setting(20.0, "1/s", minimum=0.0)
     # 1/s about d1 and d2, half of it about d3. None = 40·c_G/L0 with c_G = √(G/ρ): the
     # lowest twist modes are overdamped (about 3x critical) so stored twist cannot snap into
     # a loop faster than contact can catch it, while twist still spreads over the rod in
     # L0²/(π²·2G/(ρν)) ≈ 0.1 s for the paper's rod. (PyElastica's matched 4·damping/a² is
     # far heavier: twist then piles up at a turning end.)
-    rotational_damping: float | None = None
+    rotational_damping: float | None = setting(None, "1/s", minimum=0.0)
     # 1/m: drag rate growing with speed, speed × quadratic_drag [1/s] (spin × radius for
     # rotation), integrated implicitly. 0 turns it off.
-    quadratic_drag: float = 0.0
-    history_interval: float = 0.05  # s between history rows
+    quadratic_drag: float = setting(0.0, "1/m: extra drag rate per unit speed", minimum=0.0)
+    # between history rows
+    history_interval: float = setting(0.05, "s", minimum=0.0, strict_min=True)
     check_interval: int = 50  # steps between guard and equilibrium checks
-    hold_tolerance: float = 1e-4  # equilibrium: residual force / force scale
+    # equilibrium: residual force / force scale
+    hold_tolerance: float = setting(1e-4, minimum=0.0, maximum=1.0, strict_min=True)
     # s; > 0 also ends a hold once the shape, averaged over consecutive windows this long,
     # has moved by less than hold_tolerance × settle_scale [m] at every surface point between them
-    settle_window: float = 0.0
+    settle_window: float = setting(0.0, "s; 0 = residual test only", minimum=0.0)
     settle_scale: float | None = None  # m; None = the rod's rest length (as the kinetic test)
     speed_limit: float | None = None  # m/s; None = the axial wave speed
     # Stability probe of a hold's equilibrium (see kernel.advance): displace the candidate by
     # probe_size rest radii (seeded smooth lateral shape, probe_seed) and accept it only once
     # the displacement along that shape has decayed below probe_return of the probe; grown
     # past probe_leave probes means the rod left an unstable equilibrium.
-    stability_probe: bool = False
-    probe_size: float = 0.1
+    stability_probe: bool = setting(False)
+    probe_size: float = setting(0.1, "rest radii", minimum=0.0, maximum=1.0, strict_min=True)
     probe_return: float = 0.1
     probe_leave: float = 3.0
     probe_seed: int = 0
