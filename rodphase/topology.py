@@ -559,6 +559,10 @@ def _history_serial(points_history, normals_history, closed, ext, offset_fractio
     return out
 
 
+# The same loop as _history_serial with prange. It is a second function, not the first one
+# compiled with parallel=True: numba's disk cache is keyed by the Python function (its name
+# and line) and the signature, not by the compile flags, so one function compiled both ways
+# would load the serial machine code for the parallel call or the other way round.
 @njit(cache=True, error_model="numpy", parallel=True)
 def _history_parallel(points_history, normals_history, closed, ext, offset_fraction):
     S = points_history.shape[0]

@@ -18,6 +18,25 @@ def test_history_slots_come_from_the_one_table_of_columns():
     assert HISTORY_COLUMNS[kernel.H_START_ROTATION] == "start_rotation"
 
 
+def test_control_table_and_diagnostic_slots_come_from_their_tables():
+    """Each T_*/D_* index is a row of CONTROL_TABLES/DIAGNOSTICS, each row has one index,
+    and every control table is a field of Controls (what Controls.tables() reads by name)."""
+    import dataclasses
+
+    from rodphase.rod import Controls
+
+    for prefix, names, count in (("T_", kernel.CONTROL_TABLE_NAMES, kernel.N_TABLES),
+                                 ("D_", kernel.DIAGNOSTIC_NAMES, kernel.N_INFO)):
+        slots = {name: getattr(kernel, name) for name in dir(kernel) if name.startswith(prefix)}
+        assert sorted(slots.values()) == list(range(count)) == list(range(len(names)))
+        for name, index in slots.items():
+            assert names[index] == name[len(prefix):].lower(), name
+    fields = {f.name for f in dataclasses.fields(Controls)}
+    assert set(kernel.CONTROL_TABLE_NAMES) <= fields
+    tables = Controls(end_force=((0.0,), (3.0,))).tables()
+    assert tables[kernel.T_END_FORCE] == ((0.0,), (3.0,)) and len(tables) == kernel.N_TABLES
+
+
 def test_every_guard_the_kernel_can_trip_has_a_message_and_advice():
     codes = {getattr(kernel, name) for name in dir(kernel) if name.startswith("S_")}
     guards = codes - {kernel.S_COMPLETED, kernel.S_EQUILIBRIUM}

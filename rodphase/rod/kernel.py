@@ -115,16 +115,28 @@ ControlTables = namedtuple("ControlTables", ["times", "values", "counts"])
 # what advance writes: history (H, N_HISTORY), snap_x (H, 3, n+1), snap_d1 (H, 3, n), info (N_INFO,)
 Output = namedtuple("Output", ["history", "snap_x", "snap_d1", "info"])
 
-# control tables
-T_END_ROTATION = 0  # rad, about the axis, of the end frame (element n-1)
-T_END_FORCE = 1  # N, along the force direction, on node n
-T_END_DISPLACEMENT = 2  # m, along the axis, of the held components of node n
-T_STIFFNESS = 3  # factor on E and G (modulus ramp)
-T_RADIUS = 4  # factor on the radius (growth); rest twist follows as 1/factor
-T_LOCAL_TWIST = 5  # rad/m added to the rest twist on the active segment
-T_LOCAL_PULL = 6  # N pulling the two ends of the active segment together
-T_START_ROTATION = 7  # rad, about the axis, of the start frame (element 0)
-N_TABLES = 8
+# The control tables, one row each: the Controls field it comes from, its unit, its meaning.
+# Row order is the kernel's table index (T_*), derived here as the history's slots are.
+CONTROL_TABLES = (
+    ("end_rotation", "rad", "about the axis, of the end frame (element n-1)"),
+    ("end_force", "N", "along the force direction, on node n"),
+    ("end_displacement", "m", "along the axis, of the held components of node n"),
+    ("stiffness", "1", "factor on E and G (modulus ramp)"),
+    ("radius", "1", "factor on the radius (growth); rest twist follows as 1/factor"),
+    ("local_twist", "rad/m", "added to the rest twist on the active segment"),
+    ("local_pull", "N", "pulling the two ends of the active segment together"),
+    ("start_rotation", "rad", "about the axis, of the start frame (element 0)"),
+)
+CONTROL_TABLE_NAMES = tuple(name for name, _, _ in CONTROL_TABLES)
+T_END_ROTATION = CONTROL_TABLE_NAMES.index("end_rotation")
+T_END_FORCE = CONTROL_TABLE_NAMES.index("end_force")
+T_END_DISPLACEMENT = CONTROL_TABLE_NAMES.index("end_displacement")
+T_STIFFNESS = CONTROL_TABLE_NAMES.index("stiffness")
+T_RADIUS = CONTROL_TABLE_NAMES.index("radius")
+T_LOCAL_TWIST = CONTROL_TABLE_NAMES.index("local_twist")
+T_LOCAL_PULL = CONTROL_TABLE_NAMES.index("local_pull")
+T_START_ROTATION = CONTROL_TABLE_NAMES.index("start_rotation")
+N_TABLES = len(CONTROL_TABLES)
 
 # history slots, from the one table of columns (name, unit, meaning) in result.py
 H_TIME = HISTORY_COLUMNS.index("time")
@@ -176,20 +188,36 @@ GUARDS = {
                        "lower loading.twist_rate (turns/s)."),
 }
 
-# info entries
-D_WHERE = 0  # node or element index where a guard tripped
-D_VALUE = 1  # the value that tripped it
-D_MAX_PENETRATION = 2
-D_REBUILDS = 3
-D_MAX_PAIRS = 4
-D_RESIDUAL = 5
-D_KINETIC = 6
-D_SETTLED = 7  # 1 if the last equilibrium stop was by the settled mean shape, not the residual
-D_SETTLE_MOTION = 8  # m: last settle measure: motion of the window-mean shape or spread
-D_NEAR_REBUILDS = 9  # rebuilds of the near contact list
-D_PROBES = 10  # stability probes applied (perturbations of a candidate equilibrium)
-D_PROBES_LEFT = 11  # probes after which the rod left the candidate (it was unstable)
-N_INFO = 12
+# What advance reports besides the history, one row each (name, meaning); info[D_*] slots
+# are derived from it.
+DIAGNOSTICS = (
+    ("where", "node or element index where a guard tripped"),
+    ("value", "the value that tripped it"),
+    ("max_penetration", "largest contact overlap / radius"),
+    ("rebuilds", "rebuilds of the candidate (grid) contact list"),
+    ("max_pairs", "most candidate contact pairs"),
+    ("residual", "last residual force / force scale"),
+    ("kinetic", "last kinetic energy / (force scale x L0)"),
+    ("settled", "1 if the last equilibrium stop was by the settled mean shape, not the residual"),
+    ("settle_motion", "m: last settle measure: motion of the window-mean shape or spread"),
+    ("near_rebuilds", "rebuilds of the near contact list"),
+    ("probes", "stability probes applied (perturbations of a candidate equilibrium)"),
+    ("probes_left", "probes after which the rod left the candidate (it was unstable)"),
+)
+DIAGNOSTIC_NAMES = tuple(name for name, _ in DIAGNOSTICS)
+D_WHERE = DIAGNOSTIC_NAMES.index("where")
+D_VALUE = DIAGNOSTIC_NAMES.index("value")
+D_MAX_PENETRATION = DIAGNOSTIC_NAMES.index("max_penetration")
+D_REBUILDS = DIAGNOSTIC_NAMES.index("rebuilds")
+D_MAX_PAIRS = DIAGNOSTIC_NAMES.index("max_pairs")
+D_RESIDUAL = DIAGNOSTIC_NAMES.index("residual")
+D_KINETIC = DIAGNOSTIC_NAMES.index("kinetic")
+D_SETTLED = DIAGNOSTIC_NAMES.index("settled")
+D_SETTLE_MOTION = DIAGNOSTIC_NAMES.index("settle_motion")
+D_NEAR_REBUILDS = DIAGNOSTIC_NAMES.index("near_rebuilds")
+D_PROBES = DIAGNOSTIC_NAMES.index("probes")
+D_PROBES_LEFT = DIAGNOSTIC_NAMES.index("probes_left")
+N_INFO = len(DIAGNOSTICS)
 
 
 @njit(cache=True, inline="always")
