@@ -681,8 +681,26 @@ def validate_sweep(raw: Any) -> Frozen:
     return Frozen(out)
 
 
+# Keys added after stores were first written, each with the value that reproduces the
+# behaviour from before it existed. config_hash leaves such a key out while it holds that
+# value, so a store written before the key existed keeps its hash and still resumes; a new key
+# registers here as (section, key) -> neutral value.
+HASH_NEUTRAL: dict[tuple[str, str], Any] = {}
+
+
+def _hash_view(part: dict) -> dict:
+    """A plain config without the keys that hold their HASH_NEUTRAL value."""
+    out = {}
+    for section, values in part.items():
+        if isinstance(values, dict):
+            values = {k: v for k, v in values.items()
+                      if not ((section, k) in HASH_NEUTRAL and HASH_NEUTRAL[section, k] == v)}
+        out[section] = values
+    return out
+
+
 def config_hash(*parts: Frozen) -> str:
-    blob = json.dumps([p.plain() for p in parts], sort_keys=True, default=str)
+    blob = json.dumps([_hash_view(p.plain()) for p in parts], sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
