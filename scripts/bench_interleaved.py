@@ -10,7 +10,9 @@ subprocess warms the kernel first (numba compiles or loads its cache) and times 
 `simulate` with the process's CPU time (time.process_time), not wall time. Two cases:
 "contact", a 150-element plectoneme held under its load and twist with self-contact (the
 state is made once by OLD's code, then both versions start from it), and "free", the straight
-rod twisted below its buckling onset without contact. Prints medians and spread (min-max) per
+rod twisted below its buckling onset without contact; `--cases` adds "moving", the same
+plectoneme with the damping of PyElastica's PlectonemesCase (2/s, no speed-dependent drag), in
+which the strands keep moving and the near contact list is rebuilt on most steps. Prints medians and spread (min-max) per
 version and case, and the ratio new/old of the medians.
 """
 
@@ -44,8 +46,10 @@ if case == "make":
     np.savez(state_path, positions=r.positions, directors=r.directors)
     print(json.dumps({"contacts": float(r.history["contacts"][-1])}))
     sys.exit()
-contact = case == "contact"
+contact = case in ("contact", "moving")
 over += [("loading.twist_density", 1.0 if contact else 0.3), ("physics.self_contact", contact)]
+if case == "moving":  # PyElastica's PlectonemesCase damping (2/s, no drag): the strands move
+    over += [("solver.damping", 2.0), ("solver.quadratic_drag", 0.0)]
 problem = build(C.load_scene("twist_under_load", over, SCENES))
 if contact:
     saved = np.load(state_path)
@@ -62,7 +66,8 @@ def timed(n):
 timed(200)  # compile or load the cache
 cpu, r = timed(steps)
 print(json.dumps({"us_per_step": 1e6 * cpu / r.diagnostics["steps"], "steps": r.diagnostics["steps"],
-                  "contacts": float(r.history["contacts"][-1]), "status": r.status}))
+                  "contacts": float(r.history["contacts"][-1]), "status": r.status,
+                  "near_rebuilds": r.diagnostics.get("near_rebuilds", 0)}))
 """
 
 
@@ -79,20 +84,25 @@ def main() -> None:
     parser.add_argument("new")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--cases", default="contact,free",
+                        help="comma-separated: contact, free, moving")
     args = parser.parse_args()
+    cases = args.cases.split(",")
     if not os.path.exists(STATE):
         print("making the plectoneme state:", run(args.old, "make", 0))
-    times = {(v, c): [] for v in ("old", "new") for c in ("contact", "free")}
+    times = {(v, c): [] for v in ("old", "new") for c in cases}
     for r in range(args.rounds):
         order = ("old", "new") if r % 2 == 0 else ("new", "old")
-        for case in ("contact", "free"):
+        for case in cases:
             for version in order:
                 res = run(getattr(args, version), case, args.steps)
                 times[version, case].append(res["us_per_step"])
                 print(f"round {r} {case:7s} {version}: {res['us_per_step']:.2f} µs/step "
-                      f"({res['steps']} steps, {res['contacts']:.0f} contacts, {res['status']})",
+                      f"({res['steps']} steps, {res['contacts']:.0f} contacts, "
+                      f"near list rebuilt on {res['near_rebuilds'] / res['steps']:.0%} of steps, "
+                      f"{res['status']})",
                       flush=True)
-    for case in ("contact", "free"):
+    for case in cases:
         med = {}
         for version in ("old", "new"):
             t = times[version, case]

@@ -337,10 +337,11 @@ def test_near_list_holds_exactly_the_candidates_within_the_margin():
 
 
 def test_the_near_list_changes_no_force_while_a_plectoneme_forms():
-    # The force loop runs over the near list (gap < near_skin), rebuilt when gaps could have
-    # closed by near_skin. If a pair that comes into contact were missed, the run would differ
-    # from one whose near list is the whole candidate list (near_skin far larger than the
-    # rod). Same pairs in the same order give the same sums: equal to round-off (1e-12 m).
+    # The force loop runs over the near list (gap < its margin, which starts at near_skin and
+    # adapts to the rod's speed), rebuilt when gaps could have closed by the margin. If a pair
+    # that comes into contact were missed, the run would differ from one whose near list is
+    # the whole candidate list (near_skin far larger than the rod). The touching pairs enter
+    # either list in candidate order, so the sums run in the same order: bit-identical.
     cfg = C.load_scene("twist_under_load", [("rod.elements", 40), ("loading.twist_density", 0.75),
                                             ("loading.twist_rate", 2.0), ("solver.hold_until", "time"),
                                             ("solver.hold_max_time", 1.5)], SCENES)
@@ -352,7 +353,8 @@ def test_the_near_list_changes_no_force_while_a_plectoneme_forms():
     tight, everything = runs[0.01], runs[1e3]
     assert tight.ok and everything.ok
     assert tight.history["contacts"][-1] >= 5  # the plectoneme touches itself (9 pairs)
-    assert np.abs(tight.positions - everything.positions).max() < 1e-12
+    assert np.array_equal(tight.positions, everything.positions)
+    assert np.array_equal(tight.history["contacts"], everything.history["contacts"])
     # the tight list really was rebuilt as the rod moved, the loose one only with the grid
     assert tight.diagnostics["near_rebuilds"] > 5 * everything.diagnostics["near_rebuilds"]
 

@@ -91,7 +91,7 @@ Settings = namedtuple("Settings", [
     "friction",  # Coulomb coefficient
     "slip_speed",  # m/s, below it friction is viscous
     "skin",  # m: Verlet-list margin of the candidate pairs
-    "near_skin",  # m: gap below which a candidate pair enters the short (near) contact list
+    "near_skin",  # m: smallest gap margin of the short (near) contact list (it adapts upward)
     "penetration_limit",  # overlap / radius that counts as a failed contact
     "speed_limit",  # m/s; faster than this is a blow-up
     "history_every",  # int: steps between history rows
@@ -626,12 +626,13 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
                    radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
-                   radius_cut, rebuilds, near_rebuilds, max_pairs, force):
+                   radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
-    a node has moved skin/4 since x_build; `near` (the pairs of it within near_skin of
-    touching) when gaps could have closed by near_skin since x_near / radius_near.
+    a node has moved skin/4 since x_build; `near` (the pairs of it within near_margin of
+    touching) when gaps could have closed by near_margin since x_near / radius_near.
+    The margin adapts to how fast the rod moves (see below), between near_skin and skin/2.
     Returns the lists and their counters, then (touching pairs, largest overlap / radius,
     its element, contact energy).
     """
@@ -675,14 +676,27 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
         moved_near = np.inf
     # A gap changes by at most the two segments' largest node displacements plus the
     # growth of the two radii (closest_parameters' fallback for segments parallel to
-    # 1e-6 rad adds up to 1e-6 of an element length: negligible against near_skin).
-    # With near_skin ≥ skin/2 this never fires between grid builds: the old, one-list
+    # 1e-6 rad adds up to 1e-6 of an element length: negligible against the margin).
+    # With the margin at skin/2 this never fires between grid builds: the old, one-list
     # behaviour.
-    if 2.0 * (np.sqrt(moved_near) + grown) >= near_skin:
-        n_near = near_pairs(x, radius, pairs, n_pairs, near_skin, near)
+    near_age += 1
+    if 2.0 * (np.sqrt(moved_near) + grown) >= near_margin:
+        # The margin trades the rebuild (a pass over every candidate pair) against the force
+        # loop (a pass over the near pairs): a rod that closes the margin within a few steps
+        # rebuilds almost every step, so the margin doubles; one that keeps its list for
+        # long halves it back towards near_skin. Forces are unchanged by the margin: only
+        # touching pairs add force and they enter the near list in candidate-list order
+        # whatever its margin, so the sums run in the same order (positions bit-identical).
+        if moved_near != np.inf:  # a rebuild for motion, not for a new candidate list
+            if near_age < 8:
+                near_margin = min(2.0 * near_margin, 0.5 * skin)
+            elif near_age > 64:
+                near_margin = max(0.5 * near_margin, near_skin)
+        n_near = near_pairs(x, radius, pairs, n_pairs, near_margin, near)
         x_near[:, :] = x
         radius_near[:] = radius
         near_rebuilds += 1
+        near_age = 0
     touching, worst, worst_at, contact_energy = add_contact_forces(
         x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
         settings.slip_speed, 1.0 if incompressible else 0.0, force)
@@ -698,7 +712,7 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             if body_worst > worst:
                 worst, worst_at = body_worst, which * (n - 1)
     return (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
-            touching, worst, worst_at, contact_energy)
+            near_margin, near_age, touching, worst, worst_at, contact_energy)
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
@@ -1044,6 +1058,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     near = np.empty((2, pairs.shape[1]), dtype=np.int64)
     n_near = 0
     near_rebuilds = 0
+    near_margin = settings.near_skin  # adapted at each rebuild of the near list
+    near_age = 0  # steps since the near list was built
     radius_cut = 0.0
     rebuilds = 0
     max_pairs = 0
@@ -1135,10 +1151,10 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
 
         if contact_on:
             (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
-             touching, worst, worst_at, contact_energy) = _contact_loads(
+             near_margin, near_age, touching, worst, worst_at, contact_energy) = _contact_loads(
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
-                near_rebuilds, max_pairs, force)
+                near_rebuilds, max_pairs, near_margin, near_age, force)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:

@@ -186,7 +186,8 @@ class Contact:
     exclusion: float = setting(math.pi, "rest radii of arc length", minimum=0.0, strict_min=True)
     # the Verlet-list margin
     skin: float = setting(0.5, "rest radii", minimum=0.0, strict_min=True)
-    # the margin of the short list the force loop runs over
+    # the smallest margin of the short list the force loop runs over; the kernel doubles it
+    # (up to skin/2) for a rod that closes it within a few steps, halves it back when still
     near_skin: float = setting(0.01, "rest radii", minimum=0.0, strict_min=True)
     # beyond this overlap the run is unstable
     penetration_limit: float = setting(0.5, "overlap / radius", minimum=0.0, maximum=2.0,
