@@ -10,7 +10,8 @@ subprocess warms the kernel first (numba compiles or loads its cache) and times 
 `simulate` with the process's CPU time (time.process_time), not wall time. Two cases:
 "contact", a 150-element plectoneme held under its load and twist with self-contact (the
 state is made once by OLD's code, then both versions start from it), and "free", the straight
-rod twisted below its buckling onset without contact; `--cases` adds "moving", the same
+rod twisted below its buckling onset without contact; `--cases` adds "straight", the free
+rod with self-contact switched on (no pair ever touches), and "moving", the same
 plectoneme with the damping of PyElastica's PlectonemesCase (2/s, no speed-dependent drag), in
 which the strands keep moving and the near contact list is rebuilt on most steps. Prints medians and spread (min-max) per
 version and case, and the ratio new/old of the medians.
@@ -47,7 +48,8 @@ if case == "make":
     print(json.dumps({"contacts": float(r.history["contacts"][-1])}))
     sys.exit()
 contact = case in ("contact", "moving")
-over += [("loading.twist_density", 1.0 if contact else 0.3), ("physics.self_contact", contact)]
+over += [("loading.twist_density", 1.0 if contact else 0.3),
+         ("physics.self_contact", case != "free")]
 if case == "moving":  # PyElastica's PlectonemesCase damping (2/s, no drag): the strands move
     over += [("solver.damping", 2.0), ("solver.quadratic_drag", 0.0)]
 problem = build(C.load_scene("twist_under_load", over, SCENES))
@@ -85,7 +87,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--cases", default="contact,free",
-                        help="comma-separated: contact, free, moving")
+                        help="comma-separated: contact, free, straight, moving")
     args = parser.parse_args()
     cases = args.cases.split(",")
     if not os.path.exists(STATE):

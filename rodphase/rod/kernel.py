@@ -697,9 +697,11 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
         radius_near[:] = radius
         near_rebuilds += 1
         near_age = 0
-    touching, worst, worst_at, contact_energy = add_contact_forces(
-        x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
-        settings.slip_speed, 1.0 if incompressible else 0.0, force)
+    touching, worst, worst_at, contact_energy = 0, 0.0, -1, 0.0
+    if n_near > 0:  # a rod far from itself (e.g. straight) skips the per-element pass too
+        touching, worst, worst_at, contact_energy = add_contact_forces(
+            x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
+            settings.slip_speed, 1.0 if incompressible else 0.0, force)
     # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
     # strand can pass around such an end, so link leaves only where the scene lets it.
     for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
