@@ -35,11 +35,14 @@ Remaining differences (physics, not cost): rodphase holds the end frames as clam
 element beyond the end elements, PyElastica sets the end elements' frames; PyElastica's contact
 skips fewer neighbours (1 + ⌈0.8πa/l⌉ against ⌈πa/l⌉) and tests every pair (O(n²)), rodphase
 keeps a Verlet list from a hashed grid (O(n)) and runs its force loop over the pairs of it
-within 0.01 rest radii of touching.
+within an adaptive margin (0.01 rest radii up to a quarter radius) of touching.
 
-Timing excludes compilation: every configuration is run once briefly first. Each timed run is
-at least --seconds of wall time (PyElastica with contact at least 200 steps); the median of
---repeats runs is reported. Threads are pinned to one (NUMBA/OMP/MKL/OPENBLAS) before imports.
+Timing is CPU time of the process (time.process_time), excludes compilation (every
+configuration is run once briefly first), and interleaves the two codes: for each n and
+contact setting the timed runs alternate rodphase / PyElastica (order swapped every round),
+so load from elsewhere on the machine slows both alike. Each timed run is at least --seconds
+of CPU time (PyElastica with contact at least 200 steps); the median of --repeats runs is
+reported. Threads are pinned to one (NUMBA/OMP/MKL/OPENBLAS) before imports.
 """
 
 from __future__ import annotations
@@ -392,25 +395,31 @@ def pyelastica_healthy(rod) -> bool:
 
 # ---------------------------------------------------------------- timing
 
-def time_rodphase(rod, start, contact_on, dt, seconds, repeats):
-    """Median µs/step of rodphase over `repeats` runs of ≥ `seconds`, each from the start state."""
+def rodphase_timer(rod, start, contact_on, dt, seconds):
+    """(steps, run): `run()` times one rodphase run of `steps` steps from the start state and
+    returns (CPU µs per step, result). Compiles (or loads the cache) first."""
     x, d = start
-    warm = simulate(rodphase_problem(rod, x, d, contact_on, dt, 500))  # compile / load cache
+    simulate(rodphase_problem(rod, x, d, contact_on, dt, 500))  # compile / load cache
+    t0 = time.process_time()
     calib = simulate(rodphase_problem(rod, x, d, contact_on, dt, 2000))
-    guess = max(calib.diagnostics["us_per_step"], warm.diagnostics["us_per_step"] * 0.5)
+    guess = 1e6 * (time.process_time() - t0) / calib.diagnostics["steps"]
     steps = max(2000, math.ceil(1.1 * seconds * 1e6 / guess))
-    times, contacts, results = [], [], []
-    for _ in range(repeats):
+
+    def run():
+        t0 = time.process_time()
         result = simulate(rodphase_problem(rod, x, d, contact_on, dt, steps))
+        cpu = time.process_time() - t0
         if not result.ok:
             raise RuntimeError(f"rodphase n = {rod.elements}, contact = {contact_on}: {result.message}")
-        times.append(result.diagnostics["us_per_step"])
-        contacts.append(result.history["contacts"])
-        results.append(result)
+        return 1e6 * cpu / result.diagnostics["steps"], result
+
+    return steps, run
+
+
+def rodphase_summary(times, results, steps, dt, contact_on):
     last = results[-1]
-    hist = np.concatenate(contacts)
+    hist = np.concatenate([r.history["contacts"] for r in results])
     return {"us": statistics.median(times), "all_us": times, "steps": steps,
-            "wall": sum(r.diagnostics["wall_time"] for r in results),
             "contacts_median": float(np.median(hist)) if contact_on else 0.0,
             "contacts_final": int(last.history["contacts"][-1]) if contact_on else 0,
             "candidates": int(last.diagnostics["max_pairs"]),
@@ -421,33 +430,67 @@ def time_rodphase(rod, start, contact_on, dt, seconds, repeats):
             "sim_time": steps * dt}
 
 
-def time_pyelastica(n, start, contact_on, dt, seconds, repeats, min_steps):
-    """Median µs/step of PyElastica; runs continue one simulation. None if it blows up."""
+def pyelastica_timer(n, start, contact_on, dt, seconds, min_steps):
+    """(steps, run, finish): `run()` advances one PyElastica simulation by `steps` steps and
+    returns CPU µs per step, or None once the rod has blown up; `finish()` counts the
+    touching pairs at the end. Runs continue the same simulation."""
     x, d = start
     sim, stepper, rod = pyelastica_sim(n, x, d, contact_on, dt)
-    t = np.float64(0.0)
+    clock = {"t": np.float64(0.0)}
     for _ in range(5):  # compile / load numba caches
-        t = stepper.step(sim, t, dt)
-    t0 = time.perf_counter()
+        clock["t"] = stepper.step(sim, clock["t"], dt)
+    t0 = time.process_time()
     k = 0
-    while k < 20 or time.perf_counter() - t0 < 0.2:
-        t = stepper.step(sim, t, dt)
+    while k < 20 or time.process_time() - t0 < 0.2:
+        clock["t"] = stepper.step(sim, clock["t"], dt)
         k += 1
-    guess = (time.perf_counter() - t0) / k
+    guess = (time.process_time() - t0) / k
     steps = max(min_steps, math.ceil(1.1 * seconds / guess))
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
+
+    def run():
+        t = clock["t"]
+        t0 = time.process_time()
         for _ in range(steps):
             t = stepper.step(sim, t, dt)
-        times.append(1e6 * (time.perf_counter() - t0) / steps)
-        if not pyelastica_healthy(rod):
-            return None
-    xs = np.ascontiguousarray(rod.position_collection)
-    touching = touching_pairs(xs, np.ascontiguousarray(rod.radius),
+        cpu = time.process_time() - t0
+        clock["t"] = t
+        return 1e6 * cpu / steps if pyelastica_healthy(rod) else None
+
+    def finish():
+        xs = np.ascontiguousarray(rod.position_collection)
+        return touching_pairs(xs, np.ascontiguousarray(rod.radius),
                               np.ascontiguousarray(rod.lengths), True) if contact_on else 0
-    return {"us": statistics.median(times), "all_us": times, "steps": steps,
-            "touching": touching, "sim_time": float(t)}
+
+    return steps, run, finish
+
+
+def time_both(rod, n, start, contact_on, dt, seconds, repeats, with_pyelastica):
+    """Both codes on one configuration, their timed runs interleaved (rodphase first in even
+    rounds, PyElastica first in odd ones), so that load from elsewhere slows both alike.
+    Returns (rodphase entry, PyElastica entry or None if it blew up / was not asked)."""
+    rp_steps, rp_run = rodphase_timer(rod, start, contact_on, dt, seconds)
+    pe_timer = (pyelastica_timer(n, start, contact_on, dt, seconds, 200 if contact_on else 1000)
+                if with_pyelastica else None)
+    rp_times, rp_results, pe_times = [], [], []
+    for r in range(repeats):
+        order = ("rp", "pe") if r % 2 == 0 else ("pe", "rp")
+        for code in order:
+            if code == "rp":
+                us, result = rp_run()
+                rp_times.append(us)
+                rp_results.append(result)
+            elif pe_timer is not None:
+                us = pe_timer[1]()
+                if us is None:
+                    return rodphase_summary(rp_times or [np.nan], rp_results or [result], rp_steps,
+                                            dt, contact_on), None
+                pe_times.append(us)
+    rp = rodphase_summary(rp_times, rp_results, rp_steps, dt, contact_on)
+    pe = None
+    if pe_timer is not None:
+        pe = {"us": statistics.median(pe_times), "all_us": pe_times, "steps": pe_timer[0],
+              "touching": pe_timer[2](), "sim_time": None}
+    return rp, pe
 
 
 def _spread(entry) -> str:
@@ -467,20 +510,20 @@ def measure(n, source, seconds, repeats, log, with_pyelastica=True):
         radii = RADIUS * np.sqrt(rod.element_length / lengths)
         row = {"n": n, "dt": dt, "bound": bound, "start_contacts": relaxed_contacts, "note": note,
                "start_contacts_pyelastica": touching_pairs(xs, radii, lengths, True)}
-        pe = {}
-        if with_pyelastica:
-            for on in (False, True):
-                pe[on] = time_pyelastica(n, start, on, dt, seconds, repeats,
-                                         200 if on else 1000)
-                if pe[on] is None:
-                    break
-            if pe.get(False) is None or pe.get(True) is None:
-                note = (f"PyElastica unstable at dt = {dt:.3g} s; dt halved for both codes "
-                        f"({dt / bound:.3g} × bound)")
-                log(f"  n = {n}: {note}")
-                dt *= 0.5
-                continue
-        row["rp"] = {on: time_rodphase(rod, start, on, dt, seconds, repeats) for on in (False, True)}
+        rp, pe = {}, {}
+        for on in (False, True):
+            rp[on], pe[on] = time_both(rod, n, start, on, dt, seconds, repeats, with_pyelastica)
+            if with_pyelastica and pe[on] is None:
+                break
+        if with_pyelastica and (pe.get(False) is None or pe.get(True) is None):
+            note = (f"PyElastica unstable at dt = {dt:.3g} s; dt halved for both codes "
+                    f"({dt / bound:.3g} × bound)")
+            log(f"  n = {n}: {note}")
+            dt *= 0.5
+            continue
+        if not with_pyelastica:
+            pe = {}
+        row["rp"] = rp
         row["pe"] = pe
         row["dt"] = dt
         row["note"] = note
@@ -526,8 +569,9 @@ def report(machine, source_info, rows, extra, args, total) -> str:
         f"and relaxed {RELAX_TIME:g} s by rodphase at that n. Same dt in both, "
         f"{DT_FACTOR:g} × rodphase's stable bound with contact. Contact springs matched "
         f"(k = 10 E l0 per pair, dashpot √(k m)); PyElastica's shear stiffness set to 4GA/3. "
-        f"Median of {args.repeats} timed runs of ≥ {args.seconds:g} s each (PyElastica "
-        f"with contact ≥ 200 steps), after a warm-up run.")
+        f"CPU time, median of {args.repeats} timed runs of ≥ {args.seconds:g} s each "
+        f"(PyElastica with contact ≥ 200 steps) after a warm-up run, the two codes' runs "
+        f"interleaved.")
     lines.append("")
     lines.append("| n | dt [s] | touching pairs rodphase / PyElastica | rodphase no contact | "
                  "rodphase contact | PyElastica no contact | PyElastica contact | "
@@ -621,18 +665,24 @@ def write_section(path: Path, section: str) -> None:
 
 
 def main(argv=None) -> int:
-    global DAMPING, ROTATIONAL_FACTOR
+    global DAMPING, ROTATIONAL_FACTOR, SECTION
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--write", metavar="PATH", help="write/replace the section in this Markdown file")
     parser.add_argument("--quick", action="store_true", help="n = 50 and 150 only, one timed run each")
-    parser.add_argument("--seconds", type=float, default=1.0, help="minimum wall time of a timed run")
+    parser.add_argument("--seconds", type=float, default=1.0, help="minimum CPU time of a timed run")
     parser.add_argument("--repeats", type=int, default=None, help="timed runs per configuration "
                         "(median reported; default 3, 1 with --quick)")
     parser.add_argument("--damping", type=float, default=DAMPING,
                         help="1/s on velocities in the timed runs (both codes)")
     parser.add_argument("--rotational-factor", type=float, default=ROTATIONAL_FACTOR,
                         help="factor on rodphase's automatic rotational damping (both codes)")
+    parser.add_argument("--sizes", default=None,
+                        help="comma-separated n to time against PyElastica (default 50,100,150,200,400)")
     args = parser.parse_args(argv)
+    if (args.damping, args.rotational_factor) != (DAMPING, ROTATIONAL_FACTOR):
+        # another damping is another table: its own section, so --write keeps both
+        SECTION = (f"{SECTION}, damping {args.damping:g}/s, rotational "
+                   f"{args.rotational_factor:g} × automatic")
     DAMPING, ROTATIONAL_FACTOR = args.damping, args.rotational_factor
     if args.repeats is None:
         args.repeats = 1 if args.quick else 3
@@ -663,6 +713,8 @@ def main(argv=None) -> int:
 
     sizes = [50, 150] if args.quick else [50, 100, 150, 200, 400]
     only_rodphase = [300]
+    if args.sizes:
+        sizes, only_rodphase = [int(v) for v in args.sizes.split(",")], []
     rows, extra = [], []
     for n in sizes + only_rodphase:
         with_pe = n in sizes
