@@ -176,7 +176,8 @@ def current_radii(rest_radius: float, incompressible: bool, rest_lengths: np.nda
                   lengths: np.ndarray, radius_factor: float = 1.0) -> np.ndarray:
     """(n,) element radii of a deformed rod: the rest radius × the growth factor, thinned as
     a0/√e by the stretch e = l/l0 when the rod is incompressible."""
-    thinning = np.sqrt(rest_lengths / lengths) if incompressible else 1.0
+    # a compressible rod's radius does not follow the stretch, but it is still one per element
+    thinning = np.sqrt(rest_lengths / lengths) if incompressible else np.ones(len(lengths))
     return rest_radius * radius_factor * thinning
 
 
@@ -440,4 +441,5 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
                      directors=state.directors, radii=radii, rest_lengths=rest.copy(),
                      history=history, snapshot_positions=snapshot_positions,
                      snapshot_d1=snapshot_d1, diagnostics=diagnostics, stage_ends=stage_ends,
-                     stage_states=stage_states)
+                     stage_states=stage_states, velocities=np.ascontiguousarray(state.v.T),
+                     angular_velocities=np.ascontiguousarray(state.w.T))
