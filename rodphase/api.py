@@ -57,7 +57,7 @@ def load(scene, overrides=None, **settings) -> C.Frozen:
     items = _overrides(overrides, settings)
     if isinstance(scene, Mapping):
         plain = scene.plain() if isinstance(scene, C.Frozen) else dict(scene)
-        return C.validate_scene(C.apply_overrides(plain, items), SCENES)
+        return C.checked_initial_state(C.validate_scene(C.apply_overrides(plain, items), SCENES))
     return C.load_scene(str(scene), items, SCENES)
 
 

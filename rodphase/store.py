@@ -484,9 +484,7 @@ class Store:
                 # files before the snapshot policy kept one snapshot per history row
                 snapshot_rows=(g["snapshots/rows"][picked] if "rows" in g["snapshots"]
                                else None if snapshots else np.zeros(0, dtype=np.int64)),
-                velocities=g["velocities"][()] if "velocities" in g else None,
-                angular_velocities=(g["angular_velocities"][()] if "angular_velocities" in g
-                                    else None),
+                **{name: g[name][()] if name in g else None for name in RESTART_ARRAYS},
             )
 
     def write_run(self, run_id: str, params: dict, result: RunResult, timings: dict) -> None:
@@ -664,10 +662,11 @@ class Store:
 
 # units of the per-run arrays ("1": dimensionless or an index); history columns: HISTORY_UNITS
 ARRAY_UNITS = {"positions": "m", "directors": "1", "radii": "m", "rest_lengths": "m",
-               "velocities": "m/s", "angular_velocities": "rad/s"}
-# the final state's rates, written since a run can start from a stored state; a store written
-# before them has none, and a state read from it is at rest
-RATES = ("velocities", "angular_velocities")
+               "velocities": "m/s", "angular_velocities": "rad/s", "clamp_frames": "1"}
+# written since a run can start from a stored state: the final state's rates (a store written
+# before them has none, and a state read from it is at rest) and the clamps' frames before
+# their rotation (without them a continued run takes its clamps from the end elements)
+RESTART_ARRAYS = ("velocities", "angular_velocities", "clamp_frames")
 # Each array's dimensions, named by HDF5 dimension scales so that netCDF readers (xarray
 # through h5netcdf) see named dimensions instead of phony_dim_N. Scales of the run group
 # serve its subgroups too; `time` is the history's own column and a copy in snapshots/.
@@ -731,7 +730,7 @@ def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
     for name, values in (("node", np.arange(n + 1)), ("element", np.arange(n)),
                          ("director", np.arange(1, 4)), ("xyz", np.arange(3))):
         _write_array(g, name, values, units="1").make_scale(name)
-    for name in ("positions", "directors", "radii", "rest_lengths") + RATES:
+    for name in ("positions", "directors", "radii", "rest_lengths") + RESTART_ARRAYS:
         if getattr(result, name) is not None:
             _write_array(g, name, getattr(result, name), units=ARRAY_UNITS[name])
     history = g.create_group("history", track_order=True)
