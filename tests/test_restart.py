@@ -160,3 +160,43 @@ def test_a_compressible_rod_can_be_stored_and_continued(tmp_path):
     # both clamps turned on from the stored rotations: 2 × 0.05 turns put in
     put_in = (more.history["end_rotation"] - more.history["start_rotation"]) / (2 * np.pi)
     assert put_in[-1] == pytest.approx(0.1)
+
+
+def test_the_load_ramps_from_the_stored_load_to_the_new_one(first_half):
+    whole, address = first_half
+    stored = read_state(address).end_force
+    new = 2 * stored
+    result = run_scene(second_half(address, loading__force_multiple=10,
+                                   loading__force_ramp_time=0.2))
+    force, time = result.history["applied_force"], result.history["time"]
+    start = time[0] - 0.05  # the first row is one history interval in
+    expected = stored + (new - stored) * (time[time < start + 0.2] - start) / 0.2
+    np.testing.assert_allclose(force[time < start + 0.2], expected, rtol=2e-3)
+    assert force[-1] == pytest.approx(new)
+
+
+@pytest.mark.parametrize("sampler", ["grid", "continuation"])
+def test_a_sweep_starts_every_sample_from_the_stored_state(first_half, tmp_path, sampler):
+    import yaml
+
+    _, address = first_half
+    scene_set = {k: v for k, v in BASE.items() if not k.startswith("loading.twist")}
+    scene_set.update({"solver.hold_max_time": 0.1, "loading.force_ramp_time": 0,
+                      "initial_state": address})
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"sweep": {
+        "scene": "twist_under_load", "set": scene_set, "sampler": sampler, "samples": 2,
+        "axes": {"twist_density": [0.0, 0.05]}}}))
+    out = tmp_path / "sweep.h5"
+    result = CliRunner().invoke(main, ["sweep", str(path), "-o", str(out), "--jobs", "1",
+                                       "--quiet"], catch_exceptions=False)
+    # a continuation's sample is `ok` only at an equilibrium, which a timed hold never claims
+    assert result.exit_code == (0 if sampler == "grid" else 1), result.output
+    with read_store(out) as store:
+        runs = [store.read_run(rid) for rid in store.run_ids()]
+    added = sorted(r.history["end_rotation"][-1] / (2 * np.pi) - 2.0 for r in runs)
+    assert added == pytest.approx([0.0, 0.05 / 0.025 / (2 * np.pi)])
+    for r in runs:
+        assert r.status == ("ok" if sampler == "grid" else "not_converged")
+        assert r.history["link"][-1] == pytest.approx(r.history["end_rotation"][-1] / (2 * np.pi),
+                                                      abs=1e-3)
