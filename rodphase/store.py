@@ -673,6 +673,7 @@ RESTART_ARRAYS = ("velocities", "angular_velocities", "clamp_frames")
 DIMENSIONS = {"positions": ("node", "xyz"), "directors": ("element", "director", "xyz"),
               "radii": ("element",), "rest_lengths": ("element",),
               "velocities": ("node", "xyz"), "angular_velocities": ("element", "xyz"),
+              "clamp_frames": ("clamp", "director", "xyz"),
               "snapshots/positions": ("time", "node", "xyz"),
               "snapshots/d1": ("time", "element", "xyz"), "snapshots/rows": ("time",)}
 
@@ -700,7 +701,9 @@ def _name_dimensions(g: h5py.Group) -> None:
     for ds, _ in labelled:
         if "DIMENSION_LIST" in ds.attrs:
             del ds.attrs["DIMENSION_LIST"]
-    scales = {name: g[name] for name in ("node", "element", "director", "xyz")}
+    # a run written before clamp_frames has no `clamp` scale
+    scales = {name: g[name] for name in ("node", "element", "director", "xyz", "clamp")
+              if name in g}
     for ds in list(scales.values()) + [history["time"], g["snapshots/time"]]:
         if "REFERENCE_LIST" in ds.attrs:
             del ds.attrs["REFERENCE_LIST"]
@@ -730,6 +733,8 @@ def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
     for name, values in (("node", np.arange(n + 1)), ("element", np.arange(n)),
                          ("director", np.arange(1, 4)), ("xyz", np.arange(3))):
         _write_array(g, name, values, units="1").make_scale(name)
+    if result.clamp_frames is not None:
+        _write_array(g, "clamp", np.arange(2), units="1").make_scale("clamp")  # 0 start, 1 end
     for name in ("positions", "directors", "radii", "rest_lengths") + RESTART_ARRAYS:
         if getattr(result, name) is not None:
             _write_array(g, name, getattr(result, name), units=ARRAY_UNITS[name])
