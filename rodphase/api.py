@@ -9,7 +9,9 @@
 
 Overrides come as a dict {"rod.elements": 60}, as "key=value" strings (as `--set` takes
 them), as (key, value) pairs, or as keywords with "__" for the dots (rod__elements=60); they
-are applied in that order. Units are the config's: m, s, Pa, N, turns/s.
+are applied in that order. Units are the config's: m, s, Pa, N, turns/s. A top-level key
+goes in as itself: rodphase.run(cfg, initial_state="out/run.h5#run") starts from that stored
+run's final state (see rodphase.restart).
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ def load(scene, overrides=None, **settings) -> C.Frozen:
     items = _overrides(overrides, settings)
     if isinstance(scene, Mapping):
         plain = scene.plain() if isinstance(scene, C.Frozen) else dict(scene)
-        return C.validate_scene(C.apply_overrides(plain, items), SCENES)
+        return C.checked_initial_state(C.validate_scene(C.apply_overrides(plain, items), SCENES))
     return C.load_scene(str(scene), items, SCENES)
 
 

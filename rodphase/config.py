@@ -328,7 +328,36 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     },
 }
 
-SCENE_KEYS = ("scene", "description") + tuple(SCENE_SCHEMA)
+# top-level keys that stay out of the validated config unless given, so that the hash of
+# every config without them is what it was before they existed
+OPTIONAL_SCENE_KEYS = ("initial_state",)
+SCENE_KEYS = ("scene", "description") + tuple(SCENE_SCHEMA) + OPTIONAL_SCENE_KEYS
+
+INITIAL_STATE_FORMAT = ('"FILE.h5#RUN_ID": a rodphase store, "#", and a run id as stored '
+                        '(e.g. "out/run.h5#run")')
+
+
+def initial_state(path: str, value: Any) -> str:
+    """The format of `initial_state` (whether the file and the run exist is checked by
+    rodphase.restart.check_initial_state, which reads the file)."""
+    if value is None:
+        # --set initial_state=#run: YAML reads everything from " #" or a leading "#" as a
+        # comment, which leaves no value at all
+        raise ConfigError(path, value, INITIAL_STATE_FORMAT + "; the value is empty: YAML reads "
+                          "text after # as a comment when # starts the value, so write the "
+                          "file before it, and quote the whole value if it has spaces")
+    if not isinstance(value, str):
+        raise ConfigError(path, value, INITIAL_STATE_FORMAT)
+    file, sep, run_id = value.rpartition("#")
+    if not sep or not file.strip() or not run_id.strip():
+        raise ConfigError(path, value, INITIAL_STATE_FORMAT)
+    return value
+
+
+def split_initial_state(value: str) -> tuple[str, str]:
+    """(file, run id) of a valid initial_state."""
+    file, _, run_id = value.rpartition("#")
+    return file, run_id
 
 SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
     "scene": (text, REQUIRED),
@@ -367,6 +396,8 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
         raise ConfigError("scene", name, "one of " + ", ".join(sorted(registered)))
     out: dict[str, Any] = {"scene": text("scene", name),
                            "description": raw.get("description", "")}
+    if "initial_state" in raw:
+        out["initial_state"] = initial_state("initial_state", raw["initial_state"])
     for section, fields in SCENE_SCHEMA.items():
         given = raw.get(section) or {}
         if not isinstance(given, dict):
@@ -579,7 +610,17 @@ def resolve_scene_path(name: str, base: Path | None = None) -> Path:
 
 def load_scene(path: str | Path, overrides=(), registered=None) -> Frozen:
     path = resolve_scene_path(str(path))
-    return validate_scene(apply_overrides(read_yaml(path), list(overrides)), registered)
+    return checked_initial_state(
+        validate_scene(apply_overrides(read_yaml(path), list(overrides)), registered))
+
+
+def checked_initial_state(scene: Frozen) -> Frozen:
+    """`scene`, once the store and run its initial_state names (if any) were found and hold
+    the same rod: the loaders refuse them before anything runs or any store is made."""
+    from .restart import check_initial_state
+
+    check_initial_state(scene)
+    return scene
 
 
 def resolve_sweep_path(name: str | Path) -> Path:
@@ -630,7 +671,7 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
         for other in _axis_controls(axis):
             if other != AXES[axis][1]:
                 scene_raw[section].pop(other.split(".")[1], None)
-    scene = validate_scene(scene_raw, registered)
+    scene = checked_initial_state(validate_scene(scene_raw, registered))
     return sweep, scene
 
 

@@ -58,6 +58,11 @@ class RunResult:
     protocol stage) and, when computed, "link", "twist", "writhe" (turns). snapshot_positions
     (K, n+1, 3) and snapshot_d1 (K, n, 3) are the rod at the history rows `snapshot_rows`
     (K,) (None: one snapshot per history row, K = S; see `snapshot_history_rows`).
+    velocities (n+1, 3) [m/s] and angular_velocities (n, 3) [rad/s, material frame: components
+    on d1 d2 d3] complete the final state, so that a run can go on from it exactly (None: not
+    known, e.g. a store written before they were; such a state is taken at rest).
+    clamp_frames (2, 3, 3): the start and end clamps' frames (rows d1 d2 d3) before their
+    rotation controls, i.e. what the clamps hold at zero rotation (None: not known).
     """
 
     status: str
@@ -75,6 +80,9 @@ class RunResult:
     # not stored
     stage_states: list = field(default_factory=list, repr=False)
     snapshot_rows: np.ndarray | None = None  # history row of each snapshot; None: all rows
+    velocities: np.ndarray | None = None
+    angular_velocities: np.ndarray | None = None
+    clamp_frames: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:

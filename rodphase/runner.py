@@ -13,7 +13,7 @@ import numpy as np
 from . import config as C
 from .result import RunResult, rotation_put_in
 from .rod.model import Problem
-from .rod.simulate import clamp_frames
+from .rod.simulate import clamp_reference
 
 # A change of link between two history rows that the clamps did not put in, larger than this
 # (turns), is an escape: link moves in whole crossings (a strand passing around an end changes
@@ -74,7 +74,7 @@ def with_topology(result: RunResult, problem: Problem) -> RunResult:
     lk, tw, wr = topology_history(positions, d1)
     # The clamps sit half an element beyond the end frames; the twist over those halves
     # belongs to the rod, so that a rod clamped at both ends carries Lk = turns put in.
-    start_frame, end_frame = clamp_frames(problem.state)
+    start_frame, end_frame = clamp_reference(problem)
     extra = clamp_twist(problem, start_frame, end_frame, history, positions, d1)
     history["link"], history["twist"], history["writhe"] = lk + extra, tw + extra, wr
     if problem.ends.start_frame_held and problem.ends.end_frame_held:
@@ -86,8 +86,10 @@ def with_topology(result: RunResult, problem: Problem) -> RunResult:
             notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
                          + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
                                      for e in events) + ")")
-        turns_in = rotation_put_in(history) / (2 * np.pi)
-        unaccounted = float(np.max(np.abs(history["link"] - turns_in - np.cumsum(escapes))))
+        # relative to the first row: a run continued from a stored state starts with the
+        # link it was left with, which need not be the turns its own clamps counted
+        surplus = history["link"] - rotation_put_in(history) / (2 * np.pi)
+        unaccounted = float(np.max(np.abs(surplus - surplus[0] - np.cumsum(escapes))))
         if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
             status = "unstable"
             result.diagnostics["guard"] = "link"
@@ -145,15 +147,27 @@ def run_scene(scene, *, topology: bool | None = None,
     extra = {} if twist_targets is None else {"twist_targets": twist_targets}
     want_topology = cfg.output.topology if topology is None else topology
 
+    stored = None
+    if cfg.get("initial_state") is not None:
+        from .restart import read_state
+
+        stored = read_state(cfg.initial_state)
+
     def once(cfg):
-        return run(build(cfg, **extra), max_steps=cfg.solver.max_steps, topology=want_topology)
+        problem = build(cfg, **extra)
+        if stored is not None:
+            from .restart import continue_from
+
+            problem = continue_from(problem, stored)
+        return run(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
 
     tried = [cfg.rod.elements]
     result = once(cfg)
     wall_before = 0.0
     # A rod turned by > 135° between neighbouring frames needs more elements, not a smaller
     # step: with solver.refine_up_to, run it again with twice as many (up to that number).
-    while (result.diagnostics.get("guard") == "resolution"
+    # A run started from a stored state has the stored rod's elements and cannot refine.
+    while (result.diagnostics.get("guard") == "resolution" and stored is None
            and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
         wall_before += result.diagnostics["wall_time"]
         tried.append(min(2 * tried[-1], cfg.solver.refine_up_to))

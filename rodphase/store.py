@@ -461,11 +461,14 @@ class Store:
         return {k[len(prefix):]: _plain(v, f"{self._path}: run {run_id} attribute {k}")
                 for k, v in g.attrs.items() if k.startswith(prefix)}
 
-    def read_run(self, run_id: str) -> RunResult:
+    def read_run(self, run_id: str, snapshots: bool = True) -> RunResult:
+        """One stored run. With snapshots=False its snapshots are left on disk (empty arrays
+        of the right shape), to read a final state cheaply."""
         with self._run_group(run_id) as g:
             where = f"{self._path}: run {run_id}"
             history = g["history"]
             columns = [_plain(c, where) for c in history.attrs.get("columns", list(history))]
+            picked = slice(None) if snapshots else slice(0, 0)
             return RunResult(
                 status=_plain(g.attrs["status"], where),
                 message=_plain(g.attrs["message"], f"{where} message"),
@@ -474,12 +477,14 @@ class Store:
                 radii=g["radii"][()],
                 rest_lengths=g["rest_lengths"][()],
                 history={name: history[name][()] for name in columns},
-                snapshot_positions=g["snapshots/positions"][()],
-                snapshot_d1=g["snapshots/d1"][()],
+                snapshot_positions=g["snapshots/positions"][picked],
+                snapshot_d1=g["snapshots/d1"][picked],
                 diagnostics=json.loads(_plain(g.attrs["diagnostics"], f"{where} diagnostics")),
                 stage_ends=[int(i) for i in g.attrs["stage_ends"]],
                 # files before the snapshot policy kept one snapshot per history row
-                snapshot_rows=g["snapshots/rows"][()] if "rows" in g["snapshots"] else None,
+                snapshot_rows=(g["snapshots/rows"][picked] if "rows" in g["snapshots"]
+                               else None if snapshots else np.zeros(0, dtype=np.int64)),
+                **{name: g[name][()] if name in g else None for name in RESTART_ARRAYS},
             )
 
     def write_run(self, run_id: str, params: dict, result: RunResult, timings: dict) -> None:
@@ -656,12 +661,19 @@ class Store:
 # ----------------------------------------------------------------------------- layout
 
 # units of the per-run arrays ("1": dimensionless or an index); history columns: HISTORY_UNITS
-ARRAY_UNITS = {"positions": "m", "directors": "1", "radii": "m", "rest_lengths": "m"}
+ARRAY_UNITS = {"positions": "m", "directors": "1", "radii": "m", "rest_lengths": "m",
+               "velocities": "m/s", "angular_velocities": "rad/s", "clamp_frames": "1"}
+# written since a run can start from a stored state: the final state's rates (a store written
+# before them has none, and a state read from it is at rest) and the clamps' frames before
+# their rotation (without them a continued run takes its clamps from the end elements)
+RESTART_ARRAYS = ("velocities", "angular_velocities", "clamp_frames")
 # Each array's dimensions, named by HDF5 dimension scales so that netCDF readers (xarray
 # through h5netcdf) see named dimensions instead of phony_dim_N. Scales of the run group
 # serve its subgroups too; `time` is the history's own column and a copy in snapshots/.
 DIMENSIONS = {"positions": ("node", "xyz"), "directors": ("element", "director", "xyz"),
               "radii": ("element",), "rest_lengths": ("element",),
+              "velocities": ("node", "xyz"), "angular_velocities": ("element", "xyz"),
+              "clamp_frames": ("clamp", "director", "xyz"),
               "snapshots/positions": ("time", "node", "xyz"),
               "snapshots/d1": ("time", "element", "xyz"), "snapshots/rows": ("time",)}
 
@@ -689,7 +701,9 @@ def _name_dimensions(g: h5py.Group) -> None:
     for ds, _ in labelled:
         if "DIMENSION_LIST" in ds.attrs:
             del ds.attrs["DIMENSION_LIST"]
-    scales = {name: g[name] for name in ("node", "element", "director", "xyz")}
+    # a run written before clamp_frames has no `clamp` scale
+    scales = {name: g[name] for name in ("node", "element", "director", "xyz", "clamp")
+              if name in g}
     for ds in list(scales.values()) + [history["time"], g["snapshots/time"]]:
         if "REFERENCE_LIST" in ds.attrs:
             del ds.attrs["REFERENCE_LIST"]
@@ -719,8 +733,11 @@ def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
     for name, values in (("node", np.arange(n + 1)), ("element", np.arange(n)),
                          ("director", np.arange(1, 4)), ("xyz", np.arange(3))):
         _write_array(g, name, values, units="1").make_scale(name)
-    for name in ("positions", "directors", "radii", "rest_lengths"):
-        _write_array(g, name, getattr(result, name), units=ARRAY_UNITS[name])
+    if result.clamp_frames is not None:
+        _write_array(g, "clamp", np.arange(2), units="1").make_scale("clamp")  # 0 start, 1 end
+    for name in ("positions", "directors", "radii", "rest_lengths") + RESTART_ARRAYS:
+        if getattr(result, name) is not None:
+            _write_array(g, name, getattr(result, name), units=ARRAY_UNITS[name])
     history = g.create_group("history", track_order=True)
     time = np.asarray(result.history.get("time", np.zeros(0)))
     for name, column in result.history.items():

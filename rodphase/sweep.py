@@ -156,7 +156,10 @@ def split_continuation(result: RunResult, k: int, incompressible: bool = True) -
                    history={key: v[:row] for key, v in result.history.items()},
                    snapshot_positions=result.snapshot_positions[:row],
                    snapshot_d1=result.snapshot_d1[:row], diagnostics=diagnostics,
-                   stage_ends=result.stage_ends[:index + 1], stage_states=[])
+                   stage_ends=result.stage_ends[:index + 1], stage_states=[],
+                   # the velocities at the hold's end are not kept (a hold ends near rest):
+                   # the run's final ones would belong to a later sample
+                   velocities=None, angular_velocities=None)
 
 
 def error_result(scene_plain: dict, message: str) -> RunResult:

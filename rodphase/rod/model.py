@@ -356,3 +356,10 @@ class Problem:
     force_scale: float | None = None  # N; default max(|end force|, F_C)
     name: str = ""
     rest_curvature: np.ndarray | None = None  # (n-1, 3), added to rod.rest_curvature
+    # (start, end) (3, 3) clamp frames (rows d1 d2 d3) at zero rotation control; None: the
+    # frames half an element beyond the initial state's end elements (see clamp_frames). A run
+    # continued from a stored state sets them so that its clamps hold the rod where it was.
+    clamp_reference: tuple[np.ndarray, np.ndarray] | None = None
+    # m, added to the recorded end displacement: where the end already was when a continued
+    # run started, so that its history goes on from the stored one
+    end_displacement_offset: float = 0.0

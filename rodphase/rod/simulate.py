@@ -170,13 +170,25 @@ def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:
     return start, end
 
 
+def clamp_reference(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
+    """(start, end) clamp frames at zero rotation control: the problem's own, or those of its
+    initial state."""
+    if problem.clamp_reference is not None:
+        # C order, as clamp_frames gives them: another layout would compile the kernel again
+        start, end = problem.clamp_reference
+        return (np.ascontiguousarray(start, dtype=float),
+                np.ascontiguousarray(end, dtype=float))
+    return clamp_frames(problem.state)
+
+
 SNAPSHOT_LIMIT = 2e9  # bytes of snapshots one run may keep in memory
 
 def current_radii(rest_radius: float, incompressible: bool, rest_lengths: np.ndarray,
                   lengths: np.ndarray, radius_factor: float = 1.0) -> np.ndarray:
     """(n,) element radii of a deformed rod: the rest radius × the growth factor, thinned as
     a0/√e by the stretch e = l/l0 when the rod is incompressible."""
-    thinning = np.sqrt(rest_lengths / lengths) if incompressible else 1.0
+    # a compressible rod's radius does not follow the stretch, but it is still one per element
+    thinning = np.sqrt(rest_lengths / lengths) if incompressible else np.ones(len(lengths))
     return rest_radius * radius_factor * thinning
 
 
@@ -318,7 +330,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
     initial_end = state.x[:, n].copy()
-    start_frame, end_frame = clamp_frames(state)
+    start_frame, end_frame = clamp_reference(problem)
 
     rows_h, rows_x, rows_d, stage_ids, stage_ends, stage_states = [], [], [], [], [], []
     info = np.zeros(k.N_INFO)
@@ -380,7 +392,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
         near_rebuilds += int(info[k.D_NEAR_REBUILDS])
         max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
         max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
-        hist[:rows, k.H_END_DISPLACEMENT] += (end_position - initial_end) @ boundary.axis
+        hist[:rows, k.H_END_DISPLACEMENT] += ((end_position - initial_end) @ boundary.axis
+                                              + problem.end_displacement_offset)
         rows_h.append(hist[:rows])
         rows_x.append(snap_x[:rows])
         rows_d.append(snap_d[:rows])
@@ -440,4 +453,6 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
                      directors=state.directors, radii=radii, rest_lengths=rest.copy(),
                      history=history, snapshot_positions=snapshot_positions,
                      snapshot_d1=snapshot_d1, diagnostics=diagnostics, stage_ends=stage_ends,
-                     stage_states=stage_states)
+                     stage_states=stage_states, velocities=np.ascontiguousarray(state.v.T),
+                     angular_velocities=np.ascontiguousarray(state.w.T),
+                     clamp_frames=np.stack([start_frame, end_frame]))
