@@ -36,6 +36,7 @@ from ..result import HISTORY_COLUMNS
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
 from .contact import add_body_forces, add_contact_forces, build_pairs, near_pairs
+from .rotation import log_factor as _log_factor
 
 # The kernel's inputs, by name. numba compiles a namedtuple of arrays and scalars into a
 # plain struct (no Python per step) and caches functions taking them; simulate.py fills the
@@ -307,19 +308,6 @@ def rotated_frame(reference, axis, angle, out):
         out[r, 0] = a0 * r00 + a1 * r01 + a2 * r02
         out[r, 1] = a0 * r10 + a1 * r11 + a2 * r12
         out[r, 2] = a0 * r20 + a1 * r21 + a2 * r22
-
-
-@njit(cache=True, inline="always")
-def _log_factor(s2, cos_th):
-    """θ/sinθ from sin²θ and cosθ, for the matrix log."""
-    if s2 < 0.09 and cos_th > 0.0:
-        # asin(s)/s = Σ (2k)! / (4^k (k!)² (2k+1)) s^{2k} to k = 9: truncation < 1e-12 for
-        # s < 0.3 (θ < 17°), which covers a rod bent to a radius of 3 element lengths
-        return 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * (
-            35.0 / 1152.0 + s2 * (63.0 / 2816.0 + s2 * (231.0 / 13312.0 + s2 * (
-                143.0 / 10240.0 + s2 * (6435.0 / 557056.0 + s2 * 12155.0 / 1245184.0))))))))
-    s = np.sqrt(s2)
-    return np.arctan2(s, cos_th) / s
 
 
 @njit(cache=True, inline="always")
