@@ -956,8 +956,9 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
 
     neo_hookean: None (left out) for the paper's law (internal_loads, the clamp couples, the
     1/e and 1/e³ factors); anything else for the conservative law of neo_hookean.py. The
-    choice is by type, so numba prunes the other law's branches before compiling: each law
-    is its own specialization, and the paper law's code is what it was without the option.
+    choice is by type, so numba prunes the other law's branches before typing: each law is
+    its own specialization, and the paper law's is the code from before the option (its
+    results bit-identical: scripts/reference_positions.py --compare).
     """
     rest_length = rod.rest_length
     rest_voronoi = rod.rest_voronoi
