@@ -225,6 +225,9 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "youngs_modulus": _engine("Rod", "youngs_modulus"),
         "shear_modulus": _engine("Rod", "shear_modulus"),
         "incompressible": _engine("Rod", "incompressible"),
+        # paper: Gazzola 2018's incompressible law (the paper's figures); neo_hookean: forces
+        # and couples from one strain energy, conserving energy (rod/neo_hookean.py)
+        "law": (choice("paper", "neo_hookean"), EngineDefault("Rod", "law")),
         # given directly instead of from E, G and the radius (null: derived), for rods that
         # are not solid isotropic cylinders; the radius then sets only mass, inertia, contact
         "bend_stiffness": (number(0, strict_min=True, unit="N m^2 (B = EI)", nullable=True), None),
@@ -455,14 +458,15 @@ def buckling_force(cfg) -> float:
 
 
 def load_force(cfg) -> float | None:
-    """The constant end load [N]: F = E·A0·(1 − 1/e) for an extension e of an incompressible rod."""
+    """The constant end load [N]: F = E·A0·(1 − 1/e) for an extension e of an incompressible rod
+    (E·A0/3·(e − 1/e²) with material.law neo_hookean)."""
     loading, rod, E = cfg["loading"], cfg["rod"], cfg["material"].youngs_modulus
     if loading.force is not None:
         return loading.force
     if loading.force_multiple is not None:
         return loading.force_multiple * buckling_force(cfg)
     if loading.extension is not None:
-        return units.load_for_extension(E, rod.radius, loading.extension)
+        return units.load_for_extension(E, rod.radius, loading.extension, cfg["material"].law)
     return None
 
 
@@ -482,7 +486,7 @@ def twist_turns(cfg) -> float:
 def straight_extension(cfg) -> float:
     """L/L0 of the straight rod under the scene's constant load (1 without one)."""
     return units.extension_under_load(cfg["material"].youngs_modulus, cfg["rod"].radius,
-                                      load_force(cfg) or 0.0)
+                                      load_force(cfg) or 0.0, cfg["material"].law)
 
 
 # ---------------------------------------------------------------- loading files
@@ -726,7 +730,9 @@ def validate_sweep(raw: Any) -> Frozen:
 # behaviour from before it existed. config_hash leaves such a key out while it holds that
 # value, so a store written before the key existed keeps its hash and still resumes; a new key
 # registers here as (section, key) -> neutral value.
-HASH_NEUTRAL: dict[tuple[str, str], Any] = {}
+HASH_NEUTRAL: dict[tuple[str, str], Any] = {
+    ("material", "law"): "paper",
+}
 
 
 def _hash_view(part: dict) -> dict:

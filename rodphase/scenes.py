@@ -26,7 +26,7 @@ def rod_from(cfg) -> Rod:
     r, m = cfg.rod, cfg.material
     return Rod(length=r.length, radius=r.radius, elements=r.elements, density=r.density,
                youngs_modulus=m.youngs_modulus, shear_modulus=C.shear_modulus(cfg),
-               incompressible=m.incompressible, bend_stiffness_given=m.bend_stiffness,
+               incompressible=m.incompressible, law=m.law, bend_stiffness_given=m.bend_stiffness,
                twist_stiffness_given=m.twist_stiffness, shear_stiffness_given=m.shear_stiffness,
                axial_stiffness_given=m.axial_stiffness)
 

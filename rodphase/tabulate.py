@@ -31,7 +31,7 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     row["phi_a_rest"] = float(units.twist_density_for_rotation(rotation_put_in(h)[-1], radius,
                                                                rest_length))
     e_load = units.extension_under_load(d.get("youngs_modulus", np.nan), radius,
-                                        float(h["applied_force"][-1]))
+                                        float(h["applied_force"][-1]), d.get("law", "paper"))
     row["phi_a_current"] = units.current_twist_density(row["phi_a_rest"], e_load)
     row["final_extension"] = float((rest_length + h["end_displacement"][-1]) / rest_length)
     row["end_force"] = float(h["end_force"][-1])

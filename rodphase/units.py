@@ -35,13 +35,29 @@ def critical_force(youngs_modulus: float, radius: float, length: float) -> float
     return math.pi**2 * youngs_modulus * math.pi * radius**4 / 4.0 / length**2
 
 
-def load_for_extension(youngs_modulus: float, radius: float, extension: float) -> float:
-    """F = E·A0·(1 − 1/e) [N]: the constant load that stretches the straight rod to L/L0 = e."""
+def load_for_extension(youngs_modulus: float, radius: float, extension: float,
+                       law: str = "paper") -> float:
+    """F = E·A0·(1 − 1/e) [N]: the constant load that stretches the straight rod to L/L0 = e;
+    with law="neo_hookean", F = E·A0/3·(e − 1/e²) (rod/neo_hookean.py)."""
+    if law == "neo_hookean":
+        return youngs_modulus * cross_section_area(radius) / 3.0 * (extension - extension**-2)
     return youngs_modulus * math.pi * radius**2 * (1.0 - 1.0 / extension)
 
 
-def extension_under_load(youngs_modulus: float, radius: float, force: float) -> float:
-    """e = 1/(1 − F/(E·A0)): L/L0 of the straight rod under the load F (inverse of the above)."""
+def extension_under_load(youngs_modulus: float, radius: float, force: float,
+                         law: str = "paper") -> float:
+    """e = 1/(1 − F/(E·A0)): L/L0 of the straight rod under the load F (inverse of the above).
+    With law="neo_hookean" the root of e³ − 3f·e² − 1 = 0, f = F/(E·A0), by Newton (the
+    tension rises monotonically with e, so the root is unique)."""
+    if law == "neo_hookean":
+        f = force / (youngs_modulus * cross_section_area(radius))
+        e = 1.0 + f
+        for _ in range(50):
+            step = (e**3 - 3.0 * f * e**2 - 1.0) / (3.0 * e**2 - 6.0 * f * e)
+            e -= step
+            if abs(step) < 1e-15 * e:
+                break
+        return e
     return 1.0 / (1.0 - force / (youngs_modulus * cross_section_area(radius)))
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 from numba.core.dispatcher import Dispatcher
 
 from rodphase.result import HISTORY, HISTORY_COLUMNS, HISTORY_UNITS
-from rodphase.rod import _jit, contact, kernel
+from rodphase.rod import _jit, contact, kernel, neo_hookean, rotation
 
 
 def test_history_slots_come_from_the_one_table_of_columns():
@@ -54,7 +54,7 @@ def test_the_cache_key_covers_every_module_with_compiled_code():
 
 
 def test_every_cached_kernel_function_uses_the_source_keyed_cache():
-    for module in (kernel, contact):
+    for module in (kernel, contact, neo_hookean, rotation):
         for name in dir(module):
             f = getattr(module, name)
             if isinstance(f, Dispatcher) and f.py_func.__module__ == module.__name__:

@@ -27,7 +27,8 @@ for _option in LLVM_OPTIONS:
 # for a user who upgrades in place. Every cached function of these modules is keyed on the
 # hash of all of them instead (tests/test_kernel_cache.py). result.py holds the history
 # table the kernel's slot indices come from. Paths are relative to the package.
-KERNEL_MODULES = ("rod/_jit.py", "rod/kernel.py", "rod/contact.py", "result.py")
+KERNEL_MODULES = ("rod/_jit.py", "rod/kernel.py", "rod/contact.py", "rod/rotation.py",
+                  "rod/neo_hookean.py", "result.py")
 
 
 def _kernel_source_hash() -> str:

@@ -36,6 +36,9 @@ from ..result import HISTORY_COLUMNS
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
 from .contact import add_body_forces, add_contact_forces, build_pairs, near_pairs
+from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
+from .neo_hookean import clamp_couple_neo_hookean, internal_loads_neo_hookean
+from .rotation import log_factor as _log_factor
 
 # The kernel's inputs, by name. numba compiles a namedtuple of arrays and scalars into a
 # plain struct (no Python per step) and caches functions taking them; simulate.py fills the
@@ -307,19 +310,6 @@ def rotated_frame(reference, axis, angle, out):
         out[r, 0] = a0 * r00 + a1 * r01 + a2 * r02
         out[r, 1] = a0 * r10 + a1 * r11 + a2 * r12
         out[r, 2] = a0 * r20 + a1 * r21 + a2 * r22
-
-
-@njit(cache=True, inline="always")
-def _log_factor(s2, cos_th):
-    """θ/sinθ from sin²θ and cosθ, for the matrix log."""
-    if s2 < 0.09 and cos_th > 0.0:
-        # asin(s)/s = Σ (2k)! / (4^k (k!)² (2k+1)) s^{2k} to k = 9: truncation < 1e-12 for
-        # s < 0.3 (θ < 17°), which covers a rod bent to a radius of 3 element lengths
-        return 1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0 + s2 * (5.0 / 112.0 + s2 * (
-            35.0 / 1152.0 + s2 * (63.0 / 2816.0 + s2 * (231.0 / 13312.0 + s2 * (
-                143.0 / 10240.0 + s2 * (6435.0 / 557056.0 + s2 * 12155.0 / 1245184.0))))))))
-    s = np.sqrt(s2)
-    return np.arctan2(s, cos_th) / s
 
 
 @njit(cache=True, inline="always")
@@ -964,7 +954,8 @@ def _start_probe(x, probe_reference, probe_shape, probe_size):
 
 
 @njit(cache=True, fastmath=_FASTMATH)
-def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out):
+def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out,
+            neo_hookean=None):
     """Advance the rod by up to n_steps steps of settings.dt from time t_start, in place.
 
     rod: RodProperties, ends: Boundary, settings: Settings, tables: ControlTables, out: Output.
@@ -978,6 +969,12 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     A step composes the pieces above: controls at the half step -> loads (internal_loads,
     the clamp couples, contact, external loads) -> kick -> guards -> record -> drift -> the
     settled-shape windows and the equilibrium test (with the stability probe).
+
+    neo_hookean: None (left out) for the paper's law (internal_loads, the clamp couples, the
+    1/e and 1/e³ factors); anything else for the conservative law of neo_hookean.py. The
+    choice is by type, so numba prunes the other law's branches before typing: each law is
+    its own specialization, and the paper law's is the code from before the option (its
+    results bit-identical: scripts/reference_positions.py --compare).
     """
     rest_length = rod.rest_length
     rest_voronoi = rod.rest_voronoi
@@ -1048,7 +1045,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     lengths = rest_length.copy()
     radius = rest_radius.copy()
     energies = np.zeros(4)
-    work = np.zeros((N_WORK, n))
+    work = np.zeros((max(N_WORK, N_WORK_NEO_HOOKEAN), n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
     # the two-level Verlet list of contact (see _contact_loads)
@@ -1117,10 +1114,17 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         r2 = f_radius * f_radius
         fb = f_stiff * r2 * r2
         f_radius_inv = 1.0 / f_radius
-        internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
-                       bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
-                       f_stiff * r2, fb, r2 * r2, f_radius_inv, u.local_twist,
-                       force, torque, dilatation, lengths, energies, work)
+        if neo_hookean is None:
+            internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
+                           bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
+                           f_stiff * r2, fb, r2 * r2, f_radius_inv, u.local_twist,
+                           force, torque, dilatation, lengths, energies, work)
+        else:
+            internal_loads_neo_hookean(x, v, Q, w, rest_length, rest_voronoi, inertia,
+                                       shear_stiffness, bend_stiffness, rest_curvature,
+                                       rest_shear, local_mask, f_stiff * r2, fb, r2 * r2,
+                                       f_radius_inv, u.local_twist, force, torque, dilatation,
+                                       lengths, energies, work, couple)
         if energies[2] < COS_MAX_TURN:
             # beyond 135° between neighbours the matrix log nears its branch cut at 180°,
             # where twist would silently wrap and link be lost: stop and say so
@@ -1133,8 +1137,17 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         # boundary, and the twist put in spans the whole rest length L0).
         clamp_torque = 0.0
         if ends.start_frame_held:
-            _start_clamp_couple(Q, rod, ends.start_frame, axis, u.start_rotation, dilatation,
-                                f_radius_inv, fb, incompressible, torque, energies, clamp, couple)
+            if neo_hookean is None:
+                _start_clamp_couple(Q, rod, ends.start_frame, axis, u.start_rotation,
+                                    dilatation, f_radius_inv, fb, incompressible, torque,
+                                    energies, clamp, couple)
+            else:
+                rotated_frame(ends.start_frame, axis, u.start_rotation, clamp)
+                couple[7] = clamp_couple_neo_hookean(
+                    clamp, Q[:, :, 0], 0, x, rest_length, rest_curvature[0, 0],
+                    rest_curvature[1, 0], f_radius_inv * rest_curvature[2, 0],
+                    fb * bend_stiffness[0, 0], fb * bend_stiffness[1, 0],
+                    fb * bend_stiffness[2, 0], False, torque, force, energies, couple)
             if couple[7] < COS_MAX_TURN:
                 # the clamp spring's log would wrap past 180° and twist the rod the wrong way
                 status = S_CLAMP_LAG
@@ -1142,9 +1155,21 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 info[D_VALUE] = np.arccos(max(couple[7], -1.0))
                 break
         if ends.end_frame_held:
-            clamp_torque = _end_clamp_couple(Q, rod, ends.end_frame, axis, u.end_rotation,
-                                             dilatation, f_radius_inv, fb, incompressible, torque,
-                                             energies, clamp, couple)
+            if neo_hookean is None:
+                clamp_torque = _end_clamp_couple(Q, rod, ends.end_frame, axis, u.end_rotation,
+                                                 dilatation, f_radius_inv, fb, incompressible,
+                                                 torque, energies, clamp, couple)
+            else:
+                rotated_frame(ends.end_frame, axis, u.end_rotation, clamp)
+                cos_end = clamp_couple_neo_hookean(
+                    Q[:, :, n - 1], clamp, n - 1, x, rest_length, rest_curvature[0, n - 2],
+                    rest_curvature[1, n - 2], f_radius_inv * rest_curvature[2, n - 2],
+                    fb * bend_stiffness[0, n - 2], fb * bend_stiffness[1, n - 2],
+                    fb * bend_stiffness[2, n - 2], True, torque, force, energies, couple)
+                for c in range(3):
+                    clamp_torque += (Q[0, c, n - 1] * couple[0] + Q[1, c, n - 1] * couple[1]
+                                     + Q[2, c, n - 1] * couple[2]) * axis[c]
+                couple[7] = cos_end
             if couple[7] < COS_MAX_TURN:
                 status = S_CLAMP_LAG
                 info[D_WHERE] = n - 1
@@ -1176,8 +1201,13 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             # t + dt/2 with the potential energy, so the recorded total is second-order accurate
             kinetic_before = _kinetic_energy(v, w, node_mass, inertia, r2)
 
-        _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
-              decay_rotation, gain_rotation, incompressible, quadratic_drag, drag_radius)
+        if neo_hookean is None:
+            _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
+                  decay_rotation, gain_rotation, incompressible, quadratic_drag, drag_radius)
+        else:
+            # the rotary inertia keeps its rest value (neo_hookean.py): no factor e
+            _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
+                  decay_rotation, gain_rotation, False, quadratic_drag, drag_radius)
         _hold_velocities(v, ends, u.displacement_rate)
 
         if check or record:

@@ -14,6 +14,11 @@ import numpy as np
 
 Table = tuple[tuple[float, ...], tuple[float, ...]]  # (times [s], values): piecewise linear
 
+# The incompressible laws: "paper" is Gazzola 2018's (force /e, couple /ε³: not the gradient
+# of an energy, the default for the paper's figures); "neo_hookean" the conservative law of
+# rod/neo_hookean.py (forces and couples from one strain energy).
+LAWS = ("paper", "neo_hookean")
+
 
 def setting(default, unit: str = "", *, minimum: float | None = None,
             maximum: float | None = None, strict_min: bool = False):
@@ -46,6 +51,7 @@ class Rod:
     intrinsic twist. With `incompressible`, the section shrinks as the rod stretches
     (A·e constant, a = a0/√e, I = I0/e²) through the 1/e and 1/e³ factors of Gazzola 2018;
     without it the law is the plain quadratic energy (used to test conservation).
+    `law` picks the incompressible law (LAWS); "neo_hookean" needs `incompressible`.
     """
 
     length: float  # m, rest length L0
@@ -57,6 +63,7 @@ class Rod:
     shear_modulus: float | None = setting(None, "Pa", minimum=0.0, strict_min=True)
     rest_curvature: tuple[float, float, float] = (0.0, 0.0, 0.0)
     incompressible: bool = setting(True)
+    law: str = "paper"  # one of LAWS; a string choice, so the config checks it (choice)
     # Stiffnesses given directly (None: from E, G and the radius), for rods that are not
     # solid isotropic cylinders (e.g. the helical buckling benchmark's B, C, S): bending
     # B = EI [N m²], twist C = GJ [N m²], shear 4GA/3 [N], axial EA [N]. The radius then only
@@ -67,6 +74,10 @@ class Rod:
     axial_stiffness_given: float | None = None
 
     def __post_init__(self):
+        if self.law not in LAWS:
+            raise ValueError(f"law must be one of {', '.join(LAWS)}; got {self.law!r}")
+        if self.law == "neo_hookean" and not self.incompressible:
+            raise ValueError("the neo-Hookean law is incompressible: it needs incompressible=True")
         if self.shear_modulus is None:
             object.__setattr__(self, "shear_modulus", 2.0 * self.youngs_modulus / 3.0)
 
