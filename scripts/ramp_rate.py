@@ -1,0 +1,112 @@
+#!/usr/bin/env python
+"""Fig 3's twist ramp faster: labels and cost at several twist rates against a fine reference.
+
+    python scripts/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/performance.md]
+
+Most of a Fig 3 sweep's steps are in the twist ramp (81 % of 40 M at 0.5 turns/s, issue #16).
+A faster ramp costs fewer steps but can overshoot the onset (a dynamic buckling lags the
+quasi-static one) and settle into another branch. This runs the first --samples points of
+configs/fig3_paper.yaml (the random sampler draws the same first points for any count) at each
+rate, and once at the scene's rate with the finer reference settings (n = 140, safety 0.25),
+then reports per rate: steps summed over the runs (a measure of work that does not depend on
+the machine or its load), the runs' own times summed, the sweep's wall time, statuses, and label agreement with the
+reference point by point. Stores go to out/ramp/ and are resumed when rerun.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from _common import machine, write_block
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "out" / "ramp"
+RODPHASE = str(Path(sys.executable).with_name("rodphase"))
+CONFIG = "fig3_paper"
+REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25"]
+
+
+def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> float:
+    """Run (or resume) one sweep and classify it; returns its wall time in seconds."""
+    args = [RODPHASE, "sweep", CONFIG, "-o", str(path), "--jobs", str(jobs), "--quiet",
+            "--set", f"sweep.samples={samples}"]
+    for item in sets:
+        args += ["--set", item]
+    t0 = time.perf_counter()
+    done = subprocess.run(args)
+    if done.returncode not in (0, 1):  # 1: some runs failed, recorded
+        raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
+    subprocess.run([RODPHASE, "classify", str(path)], check=True, capture_output=True)
+    return time.perf_counter() - t0
+
+
+def table(path: Path):
+    import rodphase
+
+    # same sampler and seed: the i-th run is the same point in every store (checked below)
+    return rodphase.table(path).sort_values("run_id").reset_index(drop=True)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=40)
+    parser.add_argument("--rates", default="0.5,1,2,4", help="turns/s, comma-separated")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--write", type=Path, action="append", default=[])
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    rates = [float(r) for r in args.rates.split(",")]
+
+    ref_path = OUT / f"reference_{args.samples}.h5"
+    walls = {"reference": sweep(ref_path, REFERENCE_SET, args.samples, args.jobs)}
+    for rate in rates:
+        path = OUT / f"rate_{rate:g}_{args.samples}.h5"
+        walls[rate] = sweep(path, [f"loading.twist_rate={rate:g}"], args.samples, args.jobs)
+
+    ref = table(ref_path)
+    keys = [k for k in ("twist_density", "extension") if k in ref]
+    rows = ["| twist rate [turns/s] | runs | steps [M] | run time [s] | sweep wall [s] | statuses | "
+            "labels as the reference | disagreeing points (Φa, L/L0: this → reference) |",
+            "|---|---|---|---|---|---|---|---|"]
+    for name in ["reference"] + rates:
+        path = ref_path if name == "reference" else OUT / f"rate_{name:g}_{args.samples}.h5"
+        t = table(path)
+        cpu = float(np.nansum(t["wall_time"]))  # each run's own time in its worker
+        statuses = ", ".join(f"{k} {v}" for k, v in t["status"].value_counts().sort_index().items())
+        same = [np.allclose([a[k] for k in keys], [b[k] for k in keys], rtol=1e-9)
+                for (_, a), (_, b) in zip(t.iterrows(), ref.iterrows())]
+        if not all(same):
+            raise SystemExit(f"{path}: its points are not the reference's")
+        agree = (t["phase"].to_numpy() == ref["phase"].to_numpy())
+        differ = "; ".join(f"{a['twist_density']:.2f}, {a['extension']:.3f}: {a['phase']} → "
+                           f"{b['phase']}" for (_, a), (_, b), ok in
+                           zip(t.iterrows(), ref.iterrows(), agree) if not ok) or "—"
+        label = ("reference (0.5, n = 140, safety 0.25)" if name == "reference" else f"{name:g}")
+        rows.append(f"| {label} | {len(t)} | {t['steps'].sum() / 1e6:.2f} | {cpu:.0f} | "
+                    f"{walls[name]:.0f} | {statuses} | {int(agree.sum())}/{len(t)} | {differ} |")
+    m = machine()
+    note = (f"Machine: {m['cpu']}, {m['nproc']} CPUs, load at the end "
+            + " ".join(f"{v:.2f}" for v in m["load"]) + ".")
+    text = "\n".join(rows) + (
+        f"\n\nFirst {args.samples} points of `{CONFIG}` (n = 80 unless refined), `--jobs "
+        f"{args.jobs}`; run time is the sum of the runs' own wall_time in their workers (a "
+        f"busy machine inflates it; steps do not depend on load). "
+        f"{note}")
+    print(text)
+    for target in args.write:
+        write_block(target, "ramp_rate", text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
