@@ -37,17 +37,19 @@ REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25"]
 
 
 def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> float:
-    """Run (or resume) one sweep and classify it; returns its wall time in seconds."""
+    """Run (or resume) one sweep and classify it; returns its wall time in seconds (NaN for a
+    store that existed: the sweep's own time is in the table written then)."""
     args = [RODPHASE, "sweep", CONFIG, "-o", str(path), "--jobs", str(jobs), "--quiet",
             "--set", f"sweep.samples={samples}"]
     for item in sets:
         args += ["--set", item]
+    resumed = path.exists()  # its wall time would be the resume's, not the sweep's
     t0 = time.perf_counter()
     done = subprocess.run(args)
     if done.returncode not in (0, 1):  # 1: some runs failed, recorded
         raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
     subprocess.run([RODPHASE, "classify", str(path)], check=True, capture_output=True)
-    return time.perf_counter() - t0
+    return float("nan") if resumed else time.perf_counter() - t0
 
 
 def table(path: Path):
