@@ -200,6 +200,8 @@ class EngineCheck:
             meta = spec.metadata
             if isinstance(spec.default, bool):
                 self._check = boolean
+            elif meta.get("choices"):
+                self._check = choice(*meta["choices"])
             else:
                 check = number(meta["minimum"], meta["maximum"], strict_min=meta["strict_min"],
                                unit=meta["unit"])
@@ -264,6 +266,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "contact": {
         "stiffness": _engine("Contact", "stiffness"),
         "damping_ratio": _engine("Contact", "damping_ratio"),
+        # explicit | implicit: how the contact dashpot is integrated (see Contact.dashpot)
+        "dashpot": _engine("Contact", "dashpot"),
         "exclusion": _engine("Contact", "exclusion"),
         "skin": _engine("Contact", "skin"),
         "near_skin": _engine("Contact", "near_skin"),
@@ -275,6 +279,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "damping": _engine("Solver", "damping"),
         "rotational_damping": _engine("Solver", "rotational_damping"),
         "quadratic_drag": _engine("Solver", "quadratic_drag"),
+        "strain_rate_damping": _engine("Solver", "strain_rate_damping"),
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
         "hold_tolerance": _engine("Solver", "hold_tolerance"),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
@@ -685,7 +690,10 @@ def validate_sweep(raw: Any) -> Frozen:
 # behaviour from before it existed. config_hash leaves such a key out while it holds that
 # value, so a store written before the key existed keeps its hash and still resumes; a new key
 # registers here as (section, key) -> neutral value.
-HASH_NEUTRAL: dict[tuple[str, str], Any] = {}
+HASH_NEUTRAL: dict[tuple[str, str], Any] = {
+    ("contact", "dashpot"): "explicit",  # issue #13: implicit contact dashpot
+    ("solver", "strain_rate_damping"): 0.0,  # issue #13: axial Kelvin–Voigt damping
+}
 
 
 def _hash_view(part: dict) -> dict:
