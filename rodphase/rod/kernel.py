@@ -821,8 +821,8 @@ def _axial_damping(x, v, inv_mass, rest_length, axial_stiffness, f_axial, eta, d
         t1[i] = d1 * inv
         t2[i] = d2 * inv
         lever = length if incompressible else rest_length[i]
-        c_dt = f_axial * axial_stiffness[i] * eta * dt / lever
-        diag[i] = 1.0 / c_dt + inv_mass[i] + inv_mass[i + 1]
+        # 1/(c_i·dt) with c_i = EA·η/lever
+        diag[i] = lever / (f_axial * axial_stiffness[i] * eta * dt) + inv_mass[i] + inv_mass[i + 1]
         rhs[i] = ((v[0, i + 1] - v[0, i]) * t0[i] + (v[1, i + 1] - v[1, i]) * t1[i]
                   + (v[2, i + 1] - v[2, i]) * t2[i])
     for i in range(n - 1):
@@ -835,12 +835,13 @@ def _axial_damping(x, v, inv_mass, rest_length, axial_stiffness, f_axial, eta, d
     impulse[n - 1] = rhs[n - 1] / diag[n - 1]
     for i in range(n - 2, -1, -1):
         impulse[i] = (rhs[i] - coupling[i] * impulse[i + 1]) / diag[i]
-    for i in range(n):
-        p = impulse[i]
-        for c in range(3):
-            tc = t0[i] if c == 0 else (t1[i] if c == 1 else t2[i])
-            v[c, i] += p * tc * inv_mass[i]
-            v[c, i + 1] -= p * tc * inv_mass[i + 1]
+    # node i: its own element's impulse along +t_i, the previous one's along −t_{i−1}
+    for i in range(n + 1):
+        a = impulse[i] * inv_mass[i] if i < n else 0.0
+        b = impulse[i - 1] * inv_mass[i] if i > 0 else 0.0
+        v[0, i] += a * t0[min(i, n - 1)] - b * t0[max(i - 1, 0)]
+        v[1, i] += a * t1[min(i, n - 1)] - b * t1[max(i - 1, 0)]
+        v[2, i] += a * t2[min(i, n - 1)] - b * t2[max(i - 1, 0)]
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
