@@ -304,3 +304,8 @@ def test_a_hairpin_snapping_shut_is_stable_with_a_dashpot_the_explicit_step_cann
     assert result.history["contacts"].max() > 0
     assert result.diagnostics["max_penetration"] < 0.1
     assert result.history["kinetic_energy"][-1] < 1e-3 * result.history["kinetic_energy"][0]
+
+
+def test_an_unknown_dashpot_names_the_valid_ones():
+    with pytest.raises(ValueError, match="explicit, implicit"):
+        Contact(enabled=True, dashpot="Implicit")

@@ -201,6 +201,11 @@ class Contact:
     penetration_limit: float = setting(0.5, "overlap / radius", minimum=0.0, maximum=2.0,
                                        strict_min=True)
 
+    def __post_init__(self):
+        allowed = Contact.__dataclass_fields__["dashpot"].metadata["choices"]
+        if self.dashpot not in allowed:
+            raise ValueError(f"contact.dashpot: {self.dashpot!r} (allowed: {', '.join(allowed)})")
+
 
 @dataclass(frozen=True)
 class Solver:
