@@ -168,7 +168,7 @@ def _stage_residuals(folder: Path) -> None:
                 print(f"    {path.stem}/{rid}: {text}")
 
 
-def fig3(variants, out: Path, samples: int, chunk: int) -> None:
+def fig3(variants, out: Path, samples: int, chunk: int, resume: bool) -> None:
     from rodphase import config as C
     from rodphase.scenes import SCENES
     from rodphase.store import read_store
@@ -176,12 +176,14 @@ def fig3(variants, out: Path, samples: int, chunk: int) -> None:
     from rodphase.tabulate import classify_table
 
     out.mkdir(parents=True, exist_ok=True)
-    walls = {name: 0.0 for name in variants}
     paths = {name: out / f"fig3_{name}.h5" for name in variants}
     for path in paths.values():
-        if path.exists():
+        if path.exists() and not resume:
             path.unlink()
-    # interleaved: each variant's sweep grows by `chunk` samples in turn (resuming its store)
+    # interleaved: each variant's sweep grows by `chunk` samples in turn (resuming its store),
+    # so that both see the same load. Two times: the sweep's (runs with topology, storing,
+    # refining; of this invocation only) and the sum of the runs' own kernel wall times
+    sweep_wall = {name: 0.0 for name in variants}
     for upto in range(chunk, samples + chunk, chunk):
         for name in variants:
             sweep, scene = C.load_sweep(ROOT / "configs/fig3_paper.yaml",
@@ -189,16 +191,26 @@ def fig3(variants, out: Path, samples: int, chunk: int) -> None:
                                         SCENES)
             report = run_sweep(sweep, scene, str(paths[name]), jobs=1, progress=False,
                                echo=lambda s: None, replace=True)
-            walls[name] += report.wall
+            sweep_wall[name] += report.wall
     print(machine())
+    tables, walls = {}, {}
     for name in variants:
         with read_store(paths[name]) as store:
-            table = classify_table(store)
-            statuses = [store._status(rid) for rid in store.run_ids()]
-        phases = table["phase"].value_counts().to_dict() if "phase" in table else {}
-        print(f"{name:8s} {samples} points: {walls[name]:.0f} s of runs "
-              f"({walls[name] / walls[variants[0]]:.2f}x); statuses "
-              f"{ {s: statuses.count(s) for s in set(statuses)} }; phases {phases}", flush=True)
+            ids = sorted(store.run_ids())[:samples]
+            walls[name] = sum(store.run_timings(rid)["wall_time"] for rid in ids)
+            tables[name] = classify_table(store).set_index("run_id").loc[ids]
+            statuses = [store.read_run(rid).status for rid in ids]
+        phases = tables[name]["phase"].value_counts().to_dict()
+        print(f"{name:8s} {len(ids)} points: sweep wall {sweep_wall[name]:.0f} s "
+              f"({sweep_wall[name] / max(sweep_wall[variants[0]], 1e-9):.2f}x) in this invocation; "
+              f"kernel wall {walls[name]:.0f} s ({walls[name] / walls[variants[0]]:.2f}x); statuses "
+              f"{ {s: statuses.count(s) for s in sorted(set(statuses))} }; phases {phases}",
+              flush=True)
+    first = tables[variants[0]]["phase"]
+    for name in variants[1:]:
+        differ = first.index[first.values != tables[name]["phase"].values]
+        print(f"{name:8s} phase differs from {variants[0]} at {len(differ)} points: "
+              + ", ".join(differ), flush=True)
 
 
 def main() -> int:
@@ -211,6 +223,7 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--chunk", type=int, default=10)
+    parser.add_argument("--resume", action="store_true", help="fig3: keep the stores, add runs")
     args = parser.parse_args()
     variants = args.variants.split(",")
     unknown = set(variants) - set(VARIANTS)
@@ -225,7 +238,7 @@ def main() -> int:
     elif args.what == "figures":
         figures(variants, out, args.only)
     else:
-        fig3(variants, out, args.samples, args.chunk)
+        fig3(variants, out, args.samples, args.chunk, args.resume)
     return 0
 
 
