@@ -200,6 +200,8 @@ class EngineCheck:
             meta = spec.metadata
             if isinstance(spec.default, bool):
                 self._check = boolean
+            elif meta.get("choices"):
+                self._check = choice(*meta["choices"])
             else:
                 check = number(meta["minimum"], meta["maximum"], strict_min=meta["strict_min"],
                                unit=meta["unit"])
@@ -267,6 +269,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "contact": {
         "stiffness": _engine("Contact", "stiffness"),
         "damping_ratio": _engine("Contact", "damping_ratio"),
+        # explicit | implicit: how the contact dashpot is integrated (see Contact.dashpot)
+        "dashpot": _engine("Contact", "dashpot"),
         "exclusion": _engine("Contact", "exclusion"),
         "skin": _engine("Contact", "skin"),
         "near_skin": _engine("Contact", "near_skin"),
@@ -278,6 +282,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "damping": _engine("Solver", "damping"),
         "rotational_damping": _engine("Solver", "rotational_damping"),
         "quadratic_drag": _engine("Solver", "quadratic_drag"),
+        "strain_rate_damping": _engine("Solver", "strain_rate_damping"),
         "hold_until": (choice("equilibrium", "time"), "equilibrium"),
         "hold_tolerance": _engine("Solver", "hold_tolerance"),
         "hold_max_time": (number(0, strict_min=True, unit="s"), 20.0),
@@ -732,6 +737,8 @@ def validate_sweep(raw: Any) -> Frozen:
 # registers here as (section, key) -> neutral value.
 HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     ("material", "law"): "paper",
+    ("contact", "dashpot"): "explicit",  # issue #13: implicit contact dashpot
+    ("solver", "strain_rate_damping"): 0.0,  # issue #13: axial Kelvin–Voigt damping
 }
 
 

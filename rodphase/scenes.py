@@ -34,7 +34,8 @@ def rod_from(cfg) -> Rod:
 def contact_from(cfg) -> Contact:
     c = cfg.contact
     return Contact(enabled=cfg.physics.self_contact, stiffness=c.stiffness,
-                   damping_ratio=c.damping_ratio, friction=cfg.physics.friction,
+                   damping_ratio=c.damping_ratio, dashpot=c.dashpot,
+                   friction=cfg.physics.friction,
                    exclusion=c.exclusion, skin=c.skin, near_skin=c.near_skin,
                    penetration_limit=c.penetration_limit)
 
@@ -44,7 +45,8 @@ def solver_from(cfg) -> Solver:
     return Solver(dt=None if s.dt == "auto" else s.dt, safety=s.safety, damping=s.damping,
                   rotational_damping=None if s.rotational_damping == "auto" else s.rotational_damping,
                   history_interval=cfg.output.history_interval, hold_tolerance=s.hold_tolerance,
-                  quadratic_drag=s.quadratic_drag, settle_window=s.settle_window,
+                  quadratic_drag=s.quadratic_drag, strain_rate_damping=s.strain_rate_damping,
+                  settle_window=s.settle_window,
                   stability_probe=s.stability_probe, probe_size=s.probe_size,
                   probe_seed=cfg.rod.seed)
 

@@ -176,9 +176,90 @@ def near_pairs(x, radius, pairs, n_pairs, margin, near):
     return count
 
 
+# Rows of the dashpot buffer that the contact loops fill when the dashpot is implicit: each
+# column is one touching pair, the nodes (i, i+1) and (j, j+1) it acts on with weights
+# (1 − s, s) and (1 − t, t), its unit normal (from j towards i), its dashpot [N s/m] and its
+# spring force [N] (the most the dashpot may pull the pair together by).
+DASHPOT_ROWS = 9
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _note_dashpot(dashpots, count, i, s, j, t, n0, n1, n2, c, spring):
+    dashpots[0, count] = i
+    dashpots[1, count] = s
+    dashpots[2, count] = j
+    dashpots[3, count] = t
+    dashpots[4, count] = n0
+    dashpots[5, count] = n1
+    dashpots[6, count] = n2
+    dashpots[7, count] = c
+    dashpots[8, count] = spring
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def apply_dashpots(v, inv_mass, dashpots, count, dt):
+    """The noted contact dashpots as impulses on the velocities after the kick: backward Euler.
+
+    For each pair, in turn (Gauss–Seidel, so a node in several contacts sees the impulses
+    already given), the dashpot force c·v_n acts with the normal relative velocity v_n at the
+    end of the step; with the pair's inverse mass w = Σ weight²/m over its four nodes that is
+    v_n ← v_n / (1 + c·dt·w), an impulse −c·dt·v_n/(1 + c·dt·w). It can only shrink |v_n|,
+    never reverse it, and removes kinetic energy ((β − β²/2)·v_n²/w with β < 1), so it imposes
+    no limit on dt whatever c is. As the explicit dashpot it may push apart but pulls the pair
+    together by no more than its spring pushes (impulse ≥ −spring·dt).
+    inv_mass: (n+1,) 1/m of the nodes, scaled as the kick scales them.
+    """
+    for k in range(count):
+        i = np.int64(dashpots[0, k])
+        s = dashpots[1, k]
+        j = np.int64(dashpots[2, k])
+        t = dashpots[3, k]
+        n0 = dashpots[4, k]
+        n1 = dashpots[5, k]
+        n2 = dashpots[6, k]
+        a0 = 1.0 - s
+        b0 = 1.0 - t
+        vn = ((a0 * v[0, i] + s * v[0, i + 1] - b0 * v[0, j] - t * v[0, j + 1]) * n0
+              + (a0 * v[1, i] + s * v[1, i + 1] - b0 * v[1, j] - t * v[1, j + 1]) * n1
+              + (a0 * v[2, i] + s * v[2, i + 1] - b0 * v[2, j] - t * v[2, j + 1]) * n2)
+        w = (a0 * a0 * inv_mass[i] + s * s * inv_mass[i + 1] + b0 * b0 * inv_mass[j]
+             + t * t * inv_mass[j + 1])
+        cdt = dashpots[7, k] * dt
+        impulse = max(-cdt * vn / (1.0 + cdt * w), -dashpots[8, k] * dt)
+        pi0 = a0 * impulse * inv_mass[i]
+        pi1 = s * impulse * inv_mass[i + 1]
+        pj0 = b0 * impulse * inv_mass[j]
+        pj1 = t * impulse * inv_mass[j + 1]
+        v[0, i] += pi0 * n0
+        v[1, i] += pi0 * n1
+        v[2, i] += pi0 * n2
+        v[0, i + 1] += pi1 * n0
+        v[1, i + 1] += pi1 * n1
+        v[2, i + 1] += pi1 * n2
+        v[0, j] -= pj0 * n0
+        v[1, j] -= pj0 * n1
+        v[2, j] -= pj0 * n2
+        v[0, j + 1] -= pj1 * n0
+        v[1, j + 1] -= pj1 * n1
+        v[2, j + 1] -= pj1 * n2
+
+
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
 def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction,
                        slip_speed, thinning, force):
+    """Add penalty contact forces of the listed pairs to `force` (3, n+1), dashpot explicit.
+
+    See `contact_forces`; this is it with the dashpot in the force.
+    """
+    touching, worst, worst_element, energy, _ = contact_forces(
+        x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction, slip_speed,
+        thinning, force, np.empty((DASHPOT_ROWS, 0)), False)
+    return touching, worst, worst_element, energy
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, friction,
+                   slip_speed, thinning, force, dashpots, implicit):
     """Add penalty contact forces of the listed pairs to `force` (3, n+1).
 
     Normal force per pair: max(0, k·δ − c·δ̇) along the line of closest approach, with δ the
@@ -194,10 +275,15 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
     along it by k·δ·a/(2l), the rest of the gradient of ½kδ². Without that term contact does
     work on a stretching rod and can pump energy into it.
 
+    With `implicit`, the dashpot is left out of the force and each touching pair is noted
+    in `dashpots` (DASHPOT_ROWS, ≥ n_pairs) for `apply_dashpots` after the kick; the normal
+    force (and friction's bound) is then the spring's alone.
+
     Returns (number of touching pairs, largest overlap / smaller radius, its element index,
-    the spring energy Σ ½·k·δ²).
+    the spring energy Σ ½·k·δ², pairs noted in `dashpots`).
     """
     n = radius.shape[0]
+    noted = 0
     damping_scale = np.sqrt(scale)
     # Per element, once (a vectorised O(n) pass): the segment vector, 1/|u|² and the
     # thinning lever a/(2|u|²). The pair loop then divides only for the line of closest
@@ -255,9 +341,15 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         rv1 = (1.0 - s) * v[1, i] + s * v[1, i + 1] - (1.0 - t) * v[1, j] - t * v[1, j + 1]
         rv2 = (1.0 - s) * v[2, i] + s * v[2, i + 1] - (1.0 - t) * v[2, j] - t * v[2, j + 1]
         vn = rv0 * n0 + rv1 * n1 + rv2 * n2
-        fn = spring - damping_scale * damping[i] * vn
-        if fn <= 0.0:
-            continue  # a dashpot may push apart, never pull together
+        if implicit:
+            _note_dashpot(dashpots, noted, i, s, j, t, n0, n1, n2, damping_scale * damping[i],
+                          spring)
+            noted += 1
+            fn = spring
+        else:
+            fn = spring - damping_scale * damping[i] * vn
+            if fn <= 0.0:
+                continue  # a dashpot may push apart, never pull together
         f0 = fn * n0
         f1 = fn * n1
         f2 = fn * n2
@@ -286,12 +378,12 @@ def add_contact_forces(x, v, radius, pairs, n_pairs, stiffness, damping, scale, 
         force[0, j + 1] -= t * f0 - gj * w0
         force[1, j + 1] -= t * f1 - gj * w1
         force[2, j + 1] -= t * f2 - gj * w2
-    return touching, worst, worst_element, energy
+    return touching, worst, worst_element, energy, noted
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
 def add_body_forces(x, v, radius, stiffness, damping, scale, end, side, axis, body_radius,
-                    exclusion, force):
+                    exclusion, force, dashpots, noted, implicit):
     """Contact of the rod with the rigid body that a held end is fixed to.
 
     The body is a semi-infinite solid cylinder of radius `body_radius` on the rod's axis line,
@@ -301,9 +393,11 @@ def add_body_forces(x, v, radius, stiffness, damping, scale, end, side, axis, bo
     elements; the penalty law is that of the rod's own contact (spring `stiffness`, dashpot
     `damping` of the node's elements, times `scale` and √scale). The reaction acts on node
     `end`, which carries the body. Nodes within `exclusion` elements of `end` are the rod's
-    own end and never touch it.
+    own end and never touch it. With `implicit` the dashpot is noted in `dashpots` from
+    column `noted` on, as in `contact_forces` (a node is the end of an element with weight 1).
 
-    Returns (touching nodes, largest overlap / radius, spring energy Σ ½·k·δ²).
+    Returns (touching nodes, largest overlap / radius, spring energy Σ ½·k·δ², the count of
+    noted dashpots).
     """
     n = radius.shape[0]
     u0 = side * axis[0]
@@ -365,15 +459,22 @@ def add_body_forces(x, v, radius, stiffness, damping, scale, end, side, axis, bo
         energy += 0.5 * spring * overlap
         if overlap > worst * a:
             worst = overlap / a
-        vn = ((v[0, i] - v[0, end]) * n0 + (v[1, i] - v[1, end]) * n1
-              + (v[2, i] - v[2, end]) * n2)
-        fn = spring - c * vn
-        if fn <= 0.0:
-            continue
+        if implicit:
+            # node i as an end of an element (weight 1), against node `end` likewise
+            _note_dashpot(dashpots, noted, min(i, n - 1), 1.0 if i == n else 0.0,
+                          min(end, n - 1), 1.0 if end == n else 0.0, n0, n1, n2, c, spring)
+            noted += 1
+            fn = spring
+        else:
+            vn = ((v[0, i] - v[0, end]) * n0 + (v[1, i] - v[1, end]) * n1
+                  + (v[2, i] - v[2, end]) * n2)
+            fn = spring - c * vn
+            if fn <= 0.0:
+                continue
         force[0, i] += fn * n0
         force[1, i] += fn * n1
         force[2, i] += fn * n2
         force[0, end] -= fn * n0
         force[1, end] -= fn * n1
         force[2, end] -= fn * n2
-    return touching, worst, energy
+    return touching, worst, energy, noted

@@ -35,7 +35,14 @@ import numpy as np
 from ..result import HISTORY_COLUMNS
 from ._jit import FASTMATH as _FASTMATH
 from ._jit import njit
-from .contact import add_body_forces, add_contact_forces, build_pairs, near_pairs
+from .contact import (
+    DASHPOT_ROWS,
+    add_body_forces,
+    apply_dashpots,
+    build_pairs,
+    contact_forces,
+    near_pairs,
+)
 from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
 from .neo_hookean import clamp_couple_neo_hookean, internal_loads_neo_hookean
 from .rotation import log_factor as _log_factor
@@ -88,9 +95,11 @@ Settings = namedtuple("Settings", [
     "damping",  # 1/s, translational
     "damping_rotation",  # 1/s, rotational, about d1 and d2 (half of it about d3)
     "quadratic_drag",  # 1/m: extra drag rate per unit speed (speed × this, in 1/s)
+    "strain_rate_damping",  # s: axial Kelvin–Voigt time η (element dashpot EA·η/l), 0 = off
     "drag_radius",  # m: lever that turns spin into a surface speed for the quadratic drag
     "contact",  # bool: self-contact on
     "exclusion",  # int: elements closer than this along the rod never touch
+    "implicit_dashpot",  # bool: contact dashpots as backward-Euler impulses after the kick
     "friction",  # Coulomb coefficient
     "slip_speed",  # m/s, below it friction is viscous
     "skin",  # m: Verlet-list margin of the candidate pairs
@@ -616,15 +625,18 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
                    radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
-                   radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force):
+                   radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force,
+                   dashpots):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
     a node has moved skin/4 since x_build; `near` (the pairs of it within near_margin of
     touching) when gaps could have closed by near_margin since x_near / radius_near.
     The margin adapts to how fast the rod moves (see below), between near_skin and skin/2.
+    With settings.implicit_dashpot the dashpots are noted in `dashpots` (regrown with the
+    lists) for apply_dashpots after the kick instead of entering `force`.
     Returns the lists and their counters, then (touching pairs, largest overlap / radius,
-    its element, contact energy).
+    its element, contact energy, the dashpot buffer, dashpots noted in it).
     """
     n = lengths.shape[0]
     incompressible = settings.incompressible
@@ -660,6 +672,8 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
         pairs, n_pairs = build_pairs(x, exclusion, 2.0 * radius_cut + longest + skin, pairs)
         if near.shape[1] < pairs.shape[1]:
             near = np.empty((2, pairs.shape[1]), dtype=np.int64)
+        if settings.implicit_dashpot and dashpots.shape[1] < near.shape[1] + 2 * (n + 1):
+            dashpots = np.empty((DASHPOT_ROWS, near.shape[1] + 2 * (n + 1)))
         x_build[:, :] = x
         rebuilds += 1
         max_pairs = max(max_pairs, n_pairs)
@@ -687,24 +701,26 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
         radius_near[:] = radius
         near_rebuilds += 1
         near_age = 0
-    touching, worst, worst_at, contact_energy = 0, 0.0, -1, 0.0
+    implicit = settings.implicit_dashpot
+    touching, worst, worst_at, contact_energy, noted = 0, 0.0, -1, 0.0, 0
     if n_near > 0:  # a rod far from itself (e.g. straight) skips the per-element pass too
-        touching, worst, worst_at, contact_energy = add_contact_forces(
+        touching, worst, worst_at, contact_energy, noted = contact_forces(
             x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
-            settings.slip_speed, 1.0 if incompressible else 0.0, force)
+            settings.slip_speed, 1.0 if incompressible else 0.0, force, dashpots, implicit)
     # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
     # strand can pass around such an end, so link leaves only where the scene lets it.
     for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
         if (ends.end_body if which == 1 else ends.start_body):
-            body_touching, body_worst, body_energy = add_body_forces(
+            body_touching, body_worst, body_energy, noted = add_body_forces(
                 x, v, radius, contact_k, contact_c, f_stiff, which * n,
-                2.0 * which - 1.0, axis, ends.body_radius, exclusion, force)
+                2.0 * which - 1.0, axis, ends.body_radius, exclusion, force, dashpots, noted,
+                implicit)
             touching += body_touching
             contact_energy += body_energy
             if body_worst > worst:
                 worst, worst_at = body_worst, which * (n - 1)
     return (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
-            near_margin, near_age, touching, worst, worst_at, contact_energy)
+            near_margin, near_age, touching, worst, worst_at, contact_energy, dashpots, noted)
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
@@ -775,6 +791,64 @@ def _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay,
             w[0, i] *= f
             w[1, i] *= f
             w[2, i] *= f
+
+
+N_AXIAL_WORK = 8  # rows of the scratch array _axial_damping needs, each of length n
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _axial_damping(x, v, inv_mass, rest_length, axial_stiffness, f_axial, eta, dt,
+                   incompressible, work):
+    """Axial Kelvin–Voigt damping over a step, backward Euler: v is the kicked velocity.
+
+    Element i carries a dashpot c_i = EA·η/l_i (η·EA·ė with ė = u_i/l0, per current area for
+    an incompressible rod) on its axial relative velocity u_i = (v_{i+1} − v_i)·t_i, t_i its
+    unit tangent. Its impulse p_i (pulling node i along +t_i, node i+1 along −t_i) taken
+    with the velocities at the end of the step, p_i = c_i·dt·(u_i + Δu_i), is a scalar
+    tridiagonal system along the rod (the tangents held at the half step):
+        (1/(c_i·dt) + 1/m_i + 1/m_{i+1})·p_i − (t_{i−1}·t_i)/m_i·p_{i−1} − (t_i·t_{i+1})/m_{i+1}·p_{i+1} = u_i,
+    symmetric and diagonally dominant, solved by one Thomas sweep forward and back (no
+    pivoting needed). It damps a mode of frequency ω at the ratio ω·η/2 for any η·dt
+    without a step limit. inv_mass (n+1,): 1/m as the kick uses it, 0 at held nodes.
+    work: (N_AXIAL_WORK, n) scratch.
+    """
+    n = rest_length.shape[0]
+    t0, t1, t2 = work[0], work[1], work[2]
+    diag = work[3]
+    rhs = work[4]
+    coupling = work[5]  # between elements i and i+1
+    impulse = work[6]
+    for i in range(n):
+        d0 = x[0, i + 1] - x[0, i]
+        d1 = x[1, i + 1] - x[1, i]
+        d2 = x[2, i + 1] - x[2, i]
+        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        inv = 1.0 / length
+        t0[i] = d0 * inv
+        t1[i] = d1 * inv
+        t2[i] = d2 * inv
+        lever = length if incompressible else rest_length[i]
+        # 1/(c_i·dt) with c_i = EA·η/lever
+        diag[i] = lever / (f_axial * axial_stiffness[i] * eta * dt) + inv_mass[i] + inv_mass[i + 1]
+        rhs[i] = ((v[0, i + 1] - v[0, i]) * t0[i] + (v[1, i + 1] - v[1, i]) * t1[i]
+                  + (v[2, i + 1] - v[2, i]) * t2[i])
+    for i in range(n - 1):
+        coupling[i] = -(t0[i] * t0[i + 1] + t1[i] * t1[i + 1] + t2[i] * t2[i + 1]) * inv_mass[i + 1]
+    # Thomas: eliminate below the diagonal, then substitute back
+    for i in range(1, n):
+        f = coupling[i - 1] / diag[i - 1]
+        diag[i] -= f * coupling[i - 1]
+        rhs[i] -= f * rhs[i - 1]
+    impulse[n - 1] = rhs[n - 1] / diag[n - 1]
+    for i in range(n - 2, -1, -1):
+        impulse[i] = (rhs[i] - coupling[i] * impulse[i + 1]) / diag[i]
+    # node i: its own element's impulse along +t_i, the previous one's along −t_{i−1}
+    for i in range(n + 1):
+        a = impulse[i] * inv_mass[i] if i < n else 0.0
+        b = impulse[i - 1] * inv_mass[i] if i > 0 else 0.0
+        v[0, i] += a * t0[min(i, n - 1)] - b * t0[max(i - 1, 0)]
+        v[1, i] += a * t1[min(i, n - 1)] - b * t1[max(i - 1, 0)]
+        v[2, i] += a * t2[min(i, n - 1)] - b * t2[max(i - 1, 0)]
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
@@ -1056,6 +1130,21 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     radius_near = rest_radius.copy()
     near = np.empty((2, pairs.shape[1]), dtype=np.int64)
     n_near = 0
+    # Stiff dissipative terms taken implicitly after the kick (see _axial_damping and
+    # contact.apply_dashpots): the dashpots noted by the contact loop, and 1/m of the free
+    # nodes as the kick scales it (0 at a node held in all three components: the impulse
+    # then goes to its partner, which is what a held node's infinite mass means).
+    implicit_dashpot = contact_on and settings.implicit_dashpot
+    dashpots = np.empty((DASHPOT_ROWS, near.shape[1] + 2 * (n + 1) if implicit_dashpot else 0))
+    noted = 0
+    eta = settings.strain_rate_damping
+    free_inv_mass = inv_mass.copy()
+    for i in (0, n):
+        held = ends.start_held if i == 0 else ends.end_held
+        if held[0] != 0 and held[1] != 0 and held[2] != 0:
+            free_inv_mass[i] = 0.0
+    kick_inv_mass = free_inv_mass.copy()
+    axial_work = np.zeros((N_AXIAL_WORK, n))
     near_rebuilds = 0
     near_margin = settings.near_skin  # adapted at each rebuild of the near list
     near_age = 0  # steps since the near list was built
@@ -1178,10 +1267,11 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
 
         if contact_on:
             (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
-             near_margin, near_age, touching, worst, worst_at, contact_energy) = _contact_loads(
+             near_margin, near_age, touching, worst, worst_at, contact_energy, dashpots,
+             noted) = _contact_loads(
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
-                near_rebuilds, max_pairs, near_margin, near_age, force)
+                near_rebuilds, max_pairs, near_margin, near_age, force, dashpots)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -1208,6 +1298,17 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             # the rotary inertia keeps its rest value (neo_hookean.py): no factor e
             _kick(v, w, force, torque, dilatation, inv_mass, inv_inertia, r2, dt, decay, gain,
                   decay_rotation, gain_rotation, False, quadratic_drag, drag_radius)
+        if eta > 0.0 or (implicit_dashpot and noted > 0):
+            # held velocities first: a held node's kicked velocity is not its velocity, and
+            # the implicit terms would pass it on to its neighbours
+            _hold_velocities(v, ends, u.displacement_rate)
+            for i in range(n + 1):
+                kick_inv_mass[i] = free_inv_mass[i] / r2
+            if eta > 0.0:
+                _axial_damping(x, v, kick_inv_mass, rest_length, shear_stiffness[2],
+                               f_stiff * r2, eta, dt, incompressible, axial_work)
+            if implicit_dashpot and noted > 0:
+                apply_dashpots(v, kick_inv_mass, dashpots, noted, dt)
         _hold_velocities(v, ends, u.displacement_rate)
 
         if check or record:

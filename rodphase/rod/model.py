@@ -21,15 +21,18 @@ LAWS = ("paper", "neo_hookean")
 
 
 def setting(default, unit: str = "", *, minimum: float | None = None,
-            maximum: float | None = None, strict_min: bool = False):
+            maximum: float | None = None, strict_min: bool = False,
+            choices: tuple[str, ...] | None = None):
     """A field a config may set: its default, unit and allowed range in one place.
 
     rodphase.config builds the schema's check for the field from this metadata (a bool
-    default is true/false, a None default also accepts "auto"), so the engine and the
-    config cannot disagree on a default, a unit or a bound.
+    default is true/false, a None default also accepts "auto", `choices` makes it one of
+    those names), so the engine and the config cannot disagree on a default, a unit or a
+    bound.
     """
     return field(default=default, metadata={"unit": unit, "minimum": minimum,
-                                            "maximum": maximum, "strict_min": strict_min})
+                                            "maximum": maximum, "strict_min": strict_min,
+                                            "choices": choices})
 
 
 def constant(value: float) -> Table:
@@ -192,6 +195,12 @@ class Contact:
     stiffness: float = setting(10.0, "E per unit overlap per unit length", minimum=0.0,
                                strict_min=True)
     damping_ratio: float = setting(0.5, minimum=0.0, maximum=10.0)
+    # explicit: the dashpot is part of the force, lagged by half a step, and takes its share
+    # of the time step (ratio ζ: the pair springs' ω grows by 1 + ζ); above ζ ≈ 1 it feeds
+    # the contact vibration instead of damping it. implicit: backward Euler per pair after
+    # the kick (contact.apply_dashpots), never reversing a pair's normal velocity, no dt
+    # limit whatever ζ.
+    dashpot: str = setting("explicit", choices=("explicit", "implicit"))
     friction: float = setting(0.0, minimum=0.0, maximum=5.0)
     slip_speed: float = 1e-4  # m/s, below it friction is viscous (regularised Coulomb)
     exclusion: float = setting(math.pi, "rest radii of arc length", minimum=0.0, strict_min=True)
@@ -203,6 +212,11 @@ class Contact:
     # beyond this overlap the run is unstable
     penetration_limit: float = setting(0.5, "overlap / radius", minimum=0.0, maximum=2.0,
                                        strict_min=True)
+
+    def __post_init__(self):
+        allowed = Contact.__dataclass_fields__["dashpot"].metadata["choices"]
+        if self.dashpot not in allowed:
+            raise ValueError(f"contact.dashpot: {self.dashpot!r} (allowed: {', '.join(allowed)})")
 
 
 @dataclass(frozen=True)
@@ -222,6 +236,11 @@ class Solver:
     # 1/m: drag rate growing with speed, speed × quadratic_drag [1/s] (spin × radius for
     # rotation), integrated implicitly. 0 turns it off.
     quadratic_drag: float = setting(0.0, "1/m: extra drag rate per unit speed", minimum=0.0)
+    # s: axial Kelvin–Voigt damping, an element stress η·E·(strain rate), integrated by
+    # backward Euler along the rod (kernel._axial_damping): a mode of frequency ω is damped
+    # at the ratio ω·η/2, so the stiff axial and contact-coupled vibrations (hundreds of Hz)
+    # far more than the slow shape changes. 0 turns it off.
+    strain_rate_damping: float = setting(0.0, "s (Kelvin-Voigt time)", minimum=0.0, maximum=1.0)
     # between history rows
     history_interval: float = setting(0.05, "s", minimum=0.0, strict_min=True)
     check_interval: int = 50  # steps between guard and equilibrium checks
@@ -348,8 +367,10 @@ def stable_time_step(rod: Rod, contact: Contact, stiffness_factor: float = 1.0,
         partners = 2.0 + 4.0 * rod.radius * max(radius_factor, 1.0) / l0
         spring = partners * contact.stiffness * rod.youngs_modulus * stiffness_factor / (
             rod.density * rod.area * radius_factor**2)
-        # the explicit dashpot (ratio ζ of the pair springs) takes its share of the step too
-        omega2 += spring * (1.0 + contact.damping_ratio) ** 2
+        # the explicit dashpot (ratio ζ of the pair springs) takes its share of the step too;
+        # the implicit one (contact.apply_dashpots) takes none
+        ratio = contact.damping_ratio if contact.dashpot == "explicit" else 0.0
+        omega2 += spring * (1.0 + ratio) ** 2
     return 2.0 / math.sqrt(omega2)
 
 
