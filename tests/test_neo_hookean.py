@@ -23,7 +23,6 @@ from rodphase.rod import (
     ramp,
     simulate,
     straight_state,
-    time_step,
 )
 from rodphase.rod import kernel as K
 from rodphase.rod.model import state_from
