@@ -437,7 +437,7 @@ SHIPPED_HASHES = {
     "fig3_grid.yaml": "4e926378f6785ab6", "fig3_paper.yaml": "4be9f4720e18fcab",
     "fig3_paper_adaptive.yaml": "fb3ef1f2765eca8f",
     "fig3_paper_reference.yaml": "220329d6f013b697", "fig3_stretched.yaml": "2aeb5350ada03a6b",
-    "hat_forces.yaml": "c15fad9cff54a4ed", "quick.yaml": "c22c977cdf503d67",
+    "hat_forces.yaml": "c15fad9cff54a4ed", "quick.yaml": "36cb25d8441dd1b6",
     "scenes/active_agent.yaml": "87702089f969f1e0",
     "scenes/fig2a_plectoneme.yaml": "00f2e4efaa6c4778",
     "scenes/fig2b_solenoid.yaml": "80068e5262ef1e65",
