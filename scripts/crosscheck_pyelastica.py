@@ -292,6 +292,9 @@ def rodphase_sets(case: str, contact: str, dt: str, rotation_damping: str,
             ("physics.self_contact", True), ("physics.friction", 0.0),
             ("ends.start_body", bodies), ("ends.end_body", bodies),
             ("solver.damping", c["damping_constant"]), ("solver.quadratic_drag", 0.0),
+            # PyElastica's contact dashpot is explicit and its rod has no internal viscosity;
+            # the scene's implicit dashpot and strain-rate damping are rodphase's own
+            ("contact.dashpot", "explicit"), ("solver.strain_rate_damping", 0.0),
             ("solver.hold_until", "time"), ("solver.hold_max_time", c["time_relax"]),
             ("output.history_interval", 0.1)]
     if contact == "example":

@@ -77,8 +77,11 @@ def test_a_solenoid_hold_ends_when_its_shape_has_settled():
     # hold, window-mean motion 2.9e-4 m against 1e-3 m) and at the shape a hold twice as
     # long reaches: writhe equal to 1e-3 turns (the writhe of a 1e-3 m motion of a 5-turn
     # coil is of that order).
+    # The explicit contact dashpot and no strain-rate damping: the settings under which the
+    # scene vibrates (its shipped implicit ones end such holds by the residual instead).
     over = {"rod.elements": 64, "loading.twist_density": 1.55, "loading.twist_rate": 1.0,
-            "solver.hold_max_time": 12.0}
+            "solver.hold_max_time": 12.0, "contact.dashpot": "explicit",
+            "solver.strain_rate_damping": 0.0}
     _, settled = run("fig2b_solenoid", **over)
     hold = settled.diagnostics["stages"][-1]
     assert settled.status == "ok" and hold["settled"], hold
@@ -106,7 +109,9 @@ def test_solenoid_loss_pulling_unwinds_the_solenoid_against_a_rising_force():
     assert f[-quarter:].mean() > f[:quarter].mean()
     rows = np.where(pull)[0]
     moved = h["end_displacement"][rows[-1]] - h["end_displacement"][rows[0] - 1]
-    assert moved == pytest.approx(0.2, abs=1e-6)  # the end displacement is prescribed exactly
+    # the end displacement is prescribed: exact up to the stage ending on a whole step, so
+    # within one step of the motion (rate x dt, 0.05 m/s x ~1e-4 s)
+    assert moved == pytest.approx(0.2, abs=0.05 * r.diagnostics["dt"])
 
 
 def test_stiffening_lifts_the_end_and_adds_writhe():

@@ -213,7 +213,9 @@ def test_continuation_shares_one_ramp_and_agrees_with_independent_runs(tmp_path)
     table = pd.read_csv(tmp_path / "c.csv")
     ok = table[table["status"] == "ok"]
     assert len(ok) >= 8
-    assert np.abs(ok["link"] - ok["end_rotation_turns"]).max() < 1e-6
+    # Lk of these straight rods is the turns put in, up to the discrete topology's error,
+    # which depends on dt: 4e-7 to 4e-6 turns measured (the runner's own check allows 0.05)
+    assert np.abs(ok["link"] - ok["end_rotation_turns"]).max() < 1e-5
 
 
 def test_adaptive_sampling_refines_where_phases_differ(tmp_path):
