@@ -229,7 +229,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "incompressible": _engine("Rod", "incompressible"),
         # paper: Gazzola 2018's incompressible law (the paper's figures); neo_hookean: forces
         # and couples from one strain energy, conserving energy (rod/neo_hookean.py)
-        "law": (choice("paper", "neo_hookean"), EngineDefault("Rod", "law")),
+        "law": _engine("Rod", "law"),
         # given directly instead of from E, G and the radius (null: derived), for rods that
         # are not solid isotropic cylinders; the radius then sets only mass, inertia, contact
         "bend_stiffness": (number(0, strict_min=True, unit="N m^2 (B = EI)", nullable=True), None),

@@ -66,7 +66,7 @@ class Rod:
     shear_modulus: float | None = setting(None, "Pa", minimum=0.0, strict_min=True)
     rest_curvature: tuple[float, float, float] = (0.0, 0.0, 0.0)
     incompressible: bool = setting(True)
-    law: str = "paper"  # one of LAWS; a string choice, so the config checks it (choice)
+    law: str = setting("paper", choices=LAWS)
     # Stiffnesses given directly (None: from E, G and the radius), for rods that are not
     # solid isotropic cylinders (e.g. the helical buckling benchmark's B, C, S): bending
     # B = EI [N m²], twist C = GJ [N m²], shear 4GA/3 [N], axial EA [N]. The radius then only
