@@ -59,9 +59,9 @@ from rodphase.rod import (
     Rod,
     Solver,
     Stage,
+    hairpin_state,
     simulate,
     stable_time_step,
-    state_from,
     straight_state,
 )
 
@@ -102,24 +102,9 @@ def hairpin(rod: Rod, overlap: float = 0.01):
     from rodphase.scenes import measured_curvature
 
     n, a = rod.elements, rod.radius
-    r_bend = a * (1.0 - overlap)
-    straight = (rod.length - math.pi * r_bend) / 2
-    s = np.linspace(0, rod.length, n + 1)
-    pts = np.zeros((n + 1, 3))
-    for i, si in enumerate(s):
-        if si <= straight:
-            pts[i] = [0, 0, si]
-        elif si <= straight + math.pi * r_bend:
-            phi = (si - straight) / r_bend
-            pts[i] = [r_bend - r_bend * math.cos(phi), 0, straight + r_bend * math.sin(phi)]
-        else:
-            pts[i] = [2 * r_bend, 0, straight - (si - straight - math.pi * r_bend)]
-    t = np.diff(pts, axis=0)
-    t /= np.linalg.norm(t, axis=1)[:, None]
-    d1 = np.tile([0.0, 1.0, 0.0], (n, 1))
-    directors = np.stack([d1, np.cross(t, d1), t], axis=1)
-    kappa = measured_curvature(directors, np.full(n, rod.length / n))
-    return state_from(pts, directors), kappa
+    state = hairpin_state(rod, a * (1.0 - overlap))
+    kappa = measured_curvature(state.directors, np.full(n, rod.length / n))
+    return state, kappa
 
 
 HAIRPIN_ENDS = Ends(start_held=(True,) * 3, start_frame_held=True, end_held=(True,) * 3,

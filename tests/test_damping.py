@@ -15,9 +15,9 @@ from rodphase.rod import (
     Rod,
     Solver,
     Stage,
+    hairpin_state,
     simulate,
     stable_time_step,
-    state_from,
     straight_state,
     time_step,
 )
@@ -249,20 +249,8 @@ def hairpin(rod, closing_speed):
     n = rod.elements
     r_bend = 2.0 * rod.radius
     straight = (rod.length - np.pi * r_bend) / 2
-    pts = np.zeros((n + 1, 3))
-    for i, si in enumerate(np.linspace(0, rod.length, n + 1)):
-        if si <= straight:
-            pts[i] = [0, 0, si]
-        elif si <= straight + np.pi * r_bend:
-            phi = (si - straight) / r_bend
-            pts[i] = [r_bend - r_bend * np.cos(phi), 0, straight + r_bend * np.sin(phi)]
-        else:
-            pts[i] = [2 * r_bend, 0, straight - (si - straight - np.pi * r_bend)]
-    t = np.diff(pts, axis=0)
-    t /= np.linalg.norm(t, axis=1)[:, None]
-    d1 = np.tile([0.0, 1.0, 0.0], (n, 1))
-    directors = np.stack([d1, np.cross(t, d1), t], axis=1)
-    state = state_from(pts, directors)
+    state = hairpin_state(rod, r_bend)
+    pts, directors = state.positions, state.directors
     arm = pts[:, 2] < straight
     state.v[0, arm & (pts[:, 0] < r_bend)] = 0.5 * closing_speed
     state.v[0, arm & (pts[:, 0] > r_bend)] = -0.5 * closing_speed

@@ -21,6 +21,7 @@ from rodphase.rod import (
     Solver,
     Stage,
     constant,
+    hairpin_state,
     ramp,
     simulate,
     stable_time_step,
@@ -382,27 +383,11 @@ def test_segments_pushed_together_do_not_interpenetrate():
     # under 5 % of the radius, the bound.
     rod = Rod(length=1.0, radius=0.025, elements=60)
     n = rod.elements
-    # hairpin: down along +z, a half circle of radius 2a, back along -z (gap 4a - 2a = 2a)
-    r_bend = 2.0 * rod.radius
-    straight = (rod.length - math.pi * r_bend) / 2
-    s = np.linspace(0, rod.length, n + 1)
-    pts = np.zeros((n + 1, 3))
-    for i, si in enumerate(s):
-        if si <= straight:
-            pts[i] = [0, 0, si]
-        elif si <= straight + math.pi * r_bend:
-            phi = (si - straight) / r_bend
-            pts[i] = [r_bend - r_bend * math.cos(phi), 0, straight + r_bend * math.sin(phi)]
-        else:
-            pts[i] = [2 * r_bend, 0, straight - (si - straight - math.pi * r_bend)]
-    t = np.diff(pts, axis=0)
-    t /= np.linalg.norm(t, axis=1)[:, None]
-    d1 = np.tile([0.0, 1.0, 0.0], (n, 1))
-    directors = np.stack([d1, np.cross(t, d1), t], axis=1)
-    from rodphase.rod import state_from
+    # hairpin: up along +z, a half circle of radius 2a, back along -z (gap 4a - 2a = 2a)
     from rodphase.scenes import measured_curvature
 
-    state = state_from(pts, directors)
+    state = hairpin_state(rod, 2.0 * rod.radius)
+    directors = state.directors
     push = 2.0  # N towards the other arm: a line load of about 2 N over the arm's contact
     problem = Problem(rod=rod, state=state, contact=Contact(enabled=True),
                       controls=Controls(end_force=constant(push), force_direction=(-1, 0, 0)),

@@ -10,6 +10,7 @@ from .model import (
                     Solver,
                     Stage,
                     constant,
+                    hairpin_state,
                     ramp,
                     stable_time_step,
                     state_from,
@@ -18,5 +19,5 @@ from .model import (
 from .simulate import simulate, time_step
 
 __all__ = ["Contact", "Controls", "Ends", "Problem", "Rod", "RodState", "Solver", "Stage",
-           "constant", "ramp", "simulate", "stable_time_step", "state_from", "straight_state",
+           "constant", "hairpin_state", "ramp", "simulate", "stable_time_step", "state_from", "straight_state",
            "time_step"]

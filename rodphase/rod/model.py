@@ -337,6 +337,28 @@ def straight_state(rod: Rod, axis=(0.0, 0.0, 1.0), twist_turns: float = 0.0,
     return state_from(positions, directors)
 
 
+def hairpin_state(rod: Rod, bend_radius: float) -> RodState:
+    """A rod folded at its middle, at rest: up along +z from the origin, a half circle of
+    `bend_radius` in the x–z plane, back down along −z at x = 2·bend_radius; d1 = +y
+    throughout, d3 the chord of each element (tests and scripts squeeze or release it)."""
+    n = rod.elements
+    straight = (rod.length - math.pi * bend_radius) / 2
+    positions = np.zeros((n + 1, 3))
+    for i, si in enumerate(np.linspace(0, rod.length, n + 1)):
+        if si <= straight:
+            positions[i] = [0, 0, si]
+        elif si <= straight + math.pi * bend_radius:
+            phi = (si - straight) / bend_radius
+            positions[i] = [bend_radius - bend_radius * math.cos(phi), 0,
+                            straight + bend_radius * math.sin(phi)]
+        else:
+            positions[i] = [2 * bend_radius, 0, straight - (si - straight - math.pi * bend_radius)]
+    t = np.diff(positions, axis=0)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    d1 = np.tile([0.0, 1.0, 0.0], (n, 1))
+    return state_from(positions, np.stack([d1, np.cross(t, d1), t], axis=1))
+
+
 def wave_speeds(rod: Rod, stiffness_factor: float = 1.0) -> tuple[float, float]:
     """(axial, shear) wave speeds [m/s]."""
     e, g = rod.wave_moduli
