@@ -170,16 +170,18 @@ def _continued(controls: Controls, stored: StoredState, first_load: bool) -> Con
 def clamp_reference(stored: StoredState, axis) -> tuple[np.ndarray, np.ndarray]:
     """The clamps' frames before rotation: the stored ones, or (a store without them) those
     half an element beyond the stored end elements turned back by the stored rotations."""
-    from scipy.spatial.transform import Rotation
-
+    from .rod.kernel import rotated_frame
     from .rod.simulate import clamp_frames
 
     if stored.clamp_frames is not None:
         return stored.clamp_frames[0].copy(), stored.clamp_frames[1].copy()
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
     start, end = clamp_frames(_state(stored))
-    return (Rotation.from_rotvec(-stored.start_rotation * axis).apply(start),
-            Rotation.from_rotvec(-stored.end_rotation * axis).apply(end))
+    # the kernel's own turn of a clamp frame, backwards: what it will turn forwards again
+    back_start, back_end = np.empty((3, 3)), np.empty((3, 3))
+    rotated_frame(start, axis, -stored.start_rotation, back_start)
+    rotated_frame(end, axis, -stored.end_rotation, back_end)
+    return back_start, back_end
 
 
 def _state(stored: StoredState) -> RodState:
