@@ -1372,6 +1372,13 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             if not last:
                 # undo the extra half step so the state is at time t
                 _drift(x, v, Q, w, -0.5 * dt)
+            if not record:
+                # the hold's end is a row too (the state is at t itself: no half step to add),
+                # or a hold shorter than a history interval would leave no row at all
+                _record(rows, x, v, Q, w, force, 0.0, t, u.end_force, force_dir, axis,
+                        end_position, tables, clamp_torque, energies, kin, touching, worst,
+                        residual, f_stiff, f_radius, contact_energy, out)
+                rows += 1
             break
 
     if status == S_COMPLETED or status == S_EQUILIBRIUM:
