@@ -1,6 +1,7 @@
 """Closed-form references that figures compare against (no simulation here).
 
-The tests check these against the literature's numbers; the kernel never uses them.
+The tests check these against the literature's numbers; the kernel never uses them (the
+quasi-static start of the twist_under_load scene uses the straight rod's buckling twist).
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ def greenhill_clamped_moment(tension: float, length: float, bending: float) -> f
     u1·u2·sin(u1 − u2) = (u1 − u2)·sin u1·sin u2 with u = L·(M ± √(M² − 4BT))/(4B).
     M_c·L/B = 8.9868 at T = 0 and 20.9835 at T·L²/B = 100; M_c → 2√(BT) for long rods.
     """
+
+    # the equation is 0/0 at T = 0 itself; T·L²/B = 1e-9 moves M_c by ~1e-10 relative
+    tension = max(tension, 1e-9 * bending / length**2)
 
     def f(m):
         d = math.sqrt(max(m * m - 4 * bending * tension, 0.0))
@@ -49,3 +53,14 @@ def stretched_rod_buckling_moments(force: float, youngs_modulus: float, radius: 
 def long_rod_buckling_moment(tension: float, bending: float) -> float:
     """M_c = 2√(B·T) [N m], the buckling moment of a long rod under tension."""
     return 2.0 * math.sqrt(bending * tension)
+
+
+def straight_rod_buckling_turns(force: float, youngs_modulus: float, shear_modulus: float,
+                                radius: float, length: float) -> float:
+    """Turns of end rotation at which the straight incompressible rod of rest radius `radius`
+    and rest length `length`, stretched by `force` [N] and clamped at both ends, buckles by
+    the clamped Greenhill criterion (the paper's law: B = E·I0/e², G·J = G·J0/e² at
+    L = e·L0): θ_c = M_c·e·L0/(G·J0/e²) = M_c·e³·L0/(G·J0), in turns θ_c/2π."""
+    e, moment, _ = stretched_rod_buckling_moments(force, youngs_modulus, radius, length)
+    polar = 2.0 * units.second_moment_of_area(radius)
+    return moment * e**3 * length / (shear_modulus * polar) / units.TURN
