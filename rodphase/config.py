@@ -260,6 +260,11 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
                                           "radius a0/sqrt(e) of the straight loaded rod",
                                           nullable=True), None),
         "twist_rate": (number(0, strict_min=True, unit="turns/s"), 0.5),
+        # twist_under_load: start in the loaded straight rod's equilibrium, twisted up to this
+        # fraction of its buckling twist (clamped Greenhill), instead of ramping the load and
+        # the twist from rest there; 0 = the paper's protocol, the whole ramp
+        "quasi_static_below": (number(0, 1, unit="fraction of the straight loaded rod's "
+                                      "clamped-Greenhill buckling twist"), 0.0),
     },
     "physics": {
         "self_contact": (boolean, True),
@@ -436,6 +441,9 @@ def _check_scene_consistency(cfg: dict) -> None:
     if len(twists) > 1:
         raise ConfigError("loading." + twists[1], loading[twists[1]],
                           "only one of twist_turns, twist_density, twist_density_current")
+    if loading.quasi_static_below > 0 and cfg.get("initial_state") is not None:
+        raise ConfigError("loading.quasi_static_below", loading.quasi_static_below,
+                          "0 with initial_state (a continued run starts from its stored state)")
     rod = cfg["rod"]
     if rod.radius >= 0.5 * rod.length:
         raise ConfigError("rod.radius", rod.radius, f"less than half of rod.length ({rod.length:g} m)")
@@ -739,6 +747,7 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     ("material", "law"): "paper",
     ("contact", "dashpot"): "explicit",  # issue #13: implicit contact dashpot
     ("solver", "strain_rate_damping"): 0.0,  # issue #13: axial Kelvin–Voigt damping
+    ("loading", "quasi_static_below"): 0.0,  # issue #16: quasi-static straight start
 }
 
 

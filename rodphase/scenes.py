@@ -18,6 +18,7 @@ from . import config as C
 from . import units
 from .rod import Contact, Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp
 from .rod.model import state_from, straight_state
+from .rod.simulate import clamp_frames
 
 TURN = units.TURN
 
@@ -112,13 +113,27 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
 
     With `twist_targets` (turns, ascending), a continuation: one load ramp, then twist to
     each target and hold there; each hold's end is one sample.
+
+    With loading.quasi_static_below = s > 0 the run starts where the paper's protocol would
+    be, had it been slow enough, at s times the straight rod's buckling twist: the straight
+    rod in its loaded equilibrium (stretched to e, twisted uniformly), with the load on and no
+    load ramp; the twist ramp starts there (or, for a target below that twist, the hold).
+    Below its buckling twist the straight rod is the only equilibrium the ramp can follow, so
+    this changes no final state; the margin 1 − s covers the theory's distance from the
+    discrete rod's onset (docs/performance.md, "A quasi-static straight start").
     """
     rod = rod_from(cfg)
     force = C.load_force(cfg) or 0.0
-    ramp_time = cfg.loading.force_ramp_time
-    stages = [Stage(ramp_time, label="load", controls=Controls(end_force=ramp(0, ramp_time, 0, force)))]
     targets = twist_targets if twist_targets is not None else [C.twist_turns(cfg)]
-    previous = 0.0
+    fraction = cfg.loading.quasi_static_below
+    if fraction > 0:
+        state, clamps, previous = _quasi_static_start(cfg, rod, force, fraction, targets[0])
+        stages = []
+    else:
+        ramp_time = cfg.loading.force_ramp_time
+        stages = [Stage(ramp_time, label="load",
+                        controls=Controls(end_force=ramp(0, ramp_time, 0, force)))]
+        state, clamps, previous = straight_state(rod), None, 0.0
     for k, turns in enumerate(targets):
         if turns != previous:
             stages.append(twist_stages(cfg, force, previous, turns, label=f"twist {k}"))
@@ -126,7 +141,46 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
                                                end_rotation=constant(TURN * turns)), f"hold {k}",
                                   sample=k))
         previous = turns
-    return _problem(cfg, rod, straight_state(rod), stages, rest_curvature=imperfection(cfg, rod))
+    problem = _problem(cfg, rod, state, stages, rest_curvature=imperfection(cfg, rod))
+    problem.clamp_reference = clamps
+    return problem
+
+
+def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_target: float):
+    """(state, clamp reference, turns) of a twist_under_load run started on the straight
+    branch: the rod stretched to the load's extension e (its nodes evenly spaced, as the
+    uniform equilibrium has them) and twisted uniformly by `fraction` of the clamped-Greenhill
+    buckling twist, or by the first target if that is less; the clamp reference is the
+    untwisted frame, so that the end rotation control carries the turns already in."""
+    from .theory import straight_rod_buckling_turns
+
+    e = cfg.ends
+    needs = {"ends.start": (e.start, "clamped"), "ends.end_axial": (e.end_axial, "force"),
+             "ends.end_lateral": (e.end_lateral, "held"),
+             "ends.end_rotation": (e.end_rotation, "held"),
+             "material.law": (cfg.material.law, "paper"),
+             "material.incompressible": (cfg.material.incompressible, True)}
+    for key, (value, allowed) in needs.items():
+        if value != allowed:
+            raise C.ConfigError(key, value, f"{allowed!r} with loading.quasi_static_below > 0 "
+                                "(the straight rod's buckling twist is known for that rod only)")
+    for key in ("bend_stiffness", "twist_stiffness", "shear_stiffness", "axial_stiffness"):
+        if cfg.material[key] is not None:
+            raise C.ConfigError("material." + key, cfg.material[key],
+                                "null with loading.quasi_static_below > 0 (the buckling twist "
+                                "is known for a solid isotropic cylinder only)")
+    if any(cfg.physics.gravity):
+        raise C.ConfigError("physics.gravity", list(cfg.physics.gravity),
+                            "[0, 0, 0] with loading.quasi_static_below > 0")
+    onset = straight_rod_buckling_turns(force, rod.youngs_modulus, rod.shear_modulus,
+                                        rod.radius, rod.length)
+    turns = math.copysign(min(abs(first_target), fraction * onset), first_target)
+    stretch = units.extension_under_load(rod.youngs_modulus, rod.radius, force)
+    twisted = straight_state(rod, twist_turns=turns)
+    twisted.x *= stretch  # along the axis from the origin: every element stretched to e
+    untwisted = straight_state(rod)
+    untwisted.x *= stretch
+    return twisted, clamp_frames(untwisted), turns
 
 
 def solenoid_loss(cfg) -> Problem:

@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "ramp"
 RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 CONFIG = "fig3_paper"
-REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25"]
+REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static_below=0"]
 
 
 def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> float:
