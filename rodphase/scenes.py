@@ -18,7 +18,6 @@ from . import config as C
 from . import units
 from .rod import Contact, Controls, Ends, Problem, Rod, Solver, Stage, constant, ramp
 from .rod.model import state_from, straight_state
-from .rod.simulate import clamp_frames
 
 TURN = units.TURN
 
@@ -126,9 +125,13 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
     force = C.load_force(cfg) or 0.0
     targets = twist_targets if twist_targets is not None else [C.twist_turns(cfg)]
     fraction = cfg.loading.quasi_static_below
+    offset = 0.0
     if fraction > 0:
         state, clamps, previous = _quasi_static_start(cfg, rod, force, fraction, targets[0])
         stages = []
+        # the end starts where the load has put it: the recorded end displacement counts
+        # from the rest length, as in the whole protocol
+        offset = float(state.x[2, -1]) - rod.length
     else:
         ramp_time = cfg.loading.force_ramp_time
         stages = [Stage(ramp_time, label="load",
@@ -143,6 +146,7 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
         previous = turns
     problem = _problem(cfg, rod, state, stages, rest_curvature=imperfection(cfg, rod))
     problem.clamp_reference = clamps
+    problem.end_displacement_offset = offset
     return problem
 
 
@@ -178,9 +182,10 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
     stretch = units.extension_under_load(rod.youngs_modulus, rod.radius, force)
     twisted = straight_state(rod, twist_turns=turns)
     twisted.x *= stretch  # along the axis from the origin: every element stretched to e
-    untwisted = straight_state(rod)
-    untwisted.x *= stretch
-    return twisted, clamp_frames(untwisted), turns
+    # the untwisted straight rod's frames are all alike, and so are its clamp frames (what
+    # clamp_frames extrapolates from them, exactly: the rotation between elements is none)
+    untwisted = np.ascontiguousarray(straight_state(rod).Q[:, :, 0])
+    return twisted, (untwisted, untwisted.copy()), turns
 
 
 def solenoid_loss(cfg) -> Problem:

@@ -25,18 +25,19 @@ def greenhill_clamped_moment(tension: float, length: float, bending: float) -> f
     tension = max(tension, 1e-9 * bending / length**2)
 
     def f(m):
-        d = math.sqrt(max(m * m - 4 * bending * tension, 0.0))
+        d = np.sqrt(np.maximum(m * m - 4 * bending * tension, 0.0))
         u1, u2 = length * (m + d) / (4 * bending), length * (m - d) / (4 * bending)
         # both sides vanish like u2² as T → 0; dividing by it keeps the root well conditioned
-        return (u1 * u2 * math.sin(u1 - u2) - (u1 - u2) * math.sin(u1) * math.sin(u2)) / u2**2
+        return (u1 * u2 * np.sin(u1 - u2) - (u1 - u2) * np.sin(u1) * np.sin(u2)) / u2**2
 
     lo = 2 * math.sqrt(bending * tension) * (1 + 1e-9) + 1e-9
     grid = np.linspace(lo, lo + 40 * bending / length, 4000)
-    values = [f(m) for m in grid]
-    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
-        if fa == 0 or np.sign(fa) != np.sign(fb):
-            return brentq(f, a, b)
-    raise ValueError(f"no clamped Greenhill root for T = {tension:g} N, L = {length:g} m")
+    values = f(grid)  # the first sign change brackets the smallest root
+    change = np.flatnonzero((values[:-1] == 0) | (np.sign(values[:-1]) != np.sign(values[1:])))
+    if not len(change):
+        raise ValueError(f"no clamped Greenhill root for T = {tension:g} N, L = {length:g} m")
+    i = change[0]
+    return brentq(lambda m: float(f(m)), grid[i], grid[i + 1])
 
 
 def stretched_rod_buckling_moments(force: float, youngs_modulus: float, radius: float,

@@ -301,3 +301,21 @@ def test_outputs_may_go_into_folders_that_do_not_exist_yet(tmp_path):
     assert cli("classify", store, "--csv", table).exit_code == 0 and table.exists()
     figure = tmp_path / "figures" / "phase.png"
     assert cli("plot", store, "--kind", "phase", "-o", figure).exit_code == 0 and figure.exists()
+
+
+def test_jobs_start_longest_first_and_equal_ones_in_sampling_order(tmp_path):
+    # the twist ramp is most of a run's work: the most twisted sample starts first, so the
+    # sweep does not end on one long run while the other workers idle
+    from rodphase.sweep import longest_first
+
+    sweep, scene = C.load_sweep(sweep_file(tmp_path, samples=6), [], SCENES)
+    jobs = plan(sweep, scene)
+    ordered = longest_first(jobs)
+    twists = [job.params[0]["twist_density"] for job in ordered]
+    assert twists == sorted(twists, reverse=True)
+    same = [jobs[0]] * 3
+    assert longest_first(same) == same
+    # a job whose problem cannot be built goes first: its worker records why at once
+    broken = plan(sweep, scene)[0]
+    broken.scene = {"scene": "no such scene"}
+    assert longest_first(jobs + [broken])[0] is broken
