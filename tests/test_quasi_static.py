@@ -70,6 +70,12 @@ def test_below_the_onset_the_straight_start_ends_where_the_whole_protocol_does()
     # the state it starts in already carries the turns: the first history row's link
     assert quick.history["link"][0] == pytest.approx(turns, abs=1e-5)
     assert total_steps(quick) < 0.1 * total_steps(whole)
+    # the other hand: the start twists the other way and carries −turns
+    _, mirror = run(*base, ("loading.twist_density", None), ("loading.twist_turns", -turns),
+                    ("loading.quasi_static_below", 0.8))
+    assert mirror.status == "ok", mirror.message
+    assert mirror.history["link"][0] == pytest.approx(-turns, abs=1e-5)
+    assert mirror.history["link"][-1] == pytest.approx(-turns, abs=1e-5)
 
 
 def test_above_the_onset_the_ramp_from_the_straight_branch_gives_the_same_plectoneme():
