@@ -207,4 +207,5 @@ def continue_from(problem: Problem, stored: StoredState) -> Problem:
         problem, state=_state(stored), stages=stages,
         controls=_continued(problem.controls, stored, first_load=not first_own),
         clamp_reference=clamp_reference(stored, problem.ends.axis),
-        end_displacement_offset=problem.end_displacement_offset + stored.end_displacement)
+        end_displacement_offset=problem.end_displacement_offset + stored.end_displacement,
+        continued=True)

@@ -86,11 +86,11 @@ def with_topology(result: RunResult, problem: Problem) -> RunResult:
             notes.append(f"link left the rod {len(events)} time(s) (ΔLk "
                          + ", ".join(f"{e['delta_link']:+.2f} at t = {e['time']:.3g} s"
                                      for e in events) + ")")
-        # A run continued from a stored state (it has its clamp reference) starts with the
-        # link it was left with, which need not be the turns its own clamps counted: there
-        # the check is relative to the first row; a fresh run must account for all its link.
+        # A run continued from a stored state starts with the link it was left with, which
+        # need not be the turns its own clamps counted: there the check is relative to the
+        # first row; any other run (one started twisted too) must account for all its link.
         surplus = history["link"] - rotation_put_in(history) / (2 * np.pi)
-        baseline = surplus[0] if problem.clamp_reference is not None else 0.0
+        baseline = surplus[0] if problem.continued else 0.0
         unaccounted = float(np.max(np.abs(surplus - baseline - np.cumsum(escapes))))
         if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
             status = "unstable"

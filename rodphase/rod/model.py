@@ -412,8 +412,13 @@ class Problem:
     rest_curvature: np.ndarray | None = None  # (n-1, 3), added to rod.rest_curvature
     # (start, end) (3, 3) clamp frames (rows d1 d2 d3) at zero rotation control; None: the
     # frames half an element beyond the initial state's end elements (see clamp_frames). A run
-    # continued from a stored state sets them so that its clamps hold the rod where it was.
+    # continued from a stored state sets them so that its clamps hold the rod where it was; a
+    # run started twisted sets the untwisted frames, so that its rotation control carries
+    # the turns already in.
     clamp_reference: tuple[np.ndarray, np.ndarray] | None = None
     # m, added to the recorded end displacement: where the end already was when a continued
-    # run started, so that its history goes on from the stored one
+    # run (or a run started stretched) started, so that its history counts from the rest length
     end_displacement_offset: float = 0.0
+    # continued from a stored state (restart.continue_from): its link is accounted for from
+    # its first history row, not from zero, since the stored run's clamps put it in
+    continued: bool = False
