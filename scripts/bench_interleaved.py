@@ -12,9 +12,10 @@ subprocess warms the kernel first (numba compiles or loads its cache) and times 
 "contact", a 150-element plectoneme held under its load and twist with self-contact (the
 state is made once by OLD's code, then both versions start from it), and "free", the straight
 rod twisted below its buckling onset without contact; `--cases` adds "straight", the free
-rod with self-contact switched on (no pair ever touches), and "moving", the same
+rod with self-contact switched on (no pair ever touches), "moving", the same
 plectoneme with the damping of PyElastica's PlectonemesCase (2/s, no speed-dependent drag), in
-which the strands keep moving and the near contact list is rebuilt on most steps. Prints medians and spread (min-max) per
+which the strands keep moving, and "explicit", the held plectoneme with the contact dashpot
+in the force (as scripts/bench_kernel.py runs it) instead of the scene's implicit one. Prints medians and spread (min-max) per
 version and case, and the ratio new/old of the medians. `--elements` runs the same cases at
 other n (each n has its own plectoneme state, made once by OLD's code).
 """
@@ -49,11 +50,13 @@ if case == "make":
     np.savez(state_path, positions=r.positions, directors=r.directors)
     print(json.dumps({"contacts": float(r.history["contacts"][-1])}))
     sys.exit()
-contact = case in ("contact", "moving")
+contact = case in ("contact", "moving", "explicit")
 over += [("loading.twist_density", 1.0 if contact else 0.3),
          ("physics.self_contact", case != "free")]
 if case == "moving":  # PyElastica's PlectonemesCase damping (2/s, no drag): the strands move
     over += [("solver.damping", 2.0), ("solver.quadratic_drag", 0.0)]
+if case == "explicit":  # the contact dashpot in the force, as bench_kernel.py times it
+    over += [("contact.dashpot", "explicit")]
 problem = build(C.load_scene("twist_under_load", over, SCENES))
 if contact:
     saved = np.load(state_path)
@@ -90,7 +93,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--cases", default="contact,free",
-                        help="comma-separated: contact, free, straight, moving")
+                        help="comma-separated: contact, free, straight, moving, explicit")
     parser.add_argument("--elements", type=int, nargs="+", default=[150],
                         help="rod elements n (each case is run at each n)")
     args = parser.parse_args()
