@@ -2,6 +2,7 @@
 """Kernel cost of two versions of the code, interleaved: CPU µs per step at n = 150.
 
     python scripts/bench_interleaved.py OLD_ROOT NEW_ROOT [--rounds 7] [--steps 20000]
+                                        [--elements 150 [300 ...]]
 
 OLD_ROOT and NEW_ROOT are directories holding a `rodphase` package (e.g. `git archive main
 rodphase | tar -x -C /tmp/old` and the work tree). Each round runs one subprocess per version
@@ -11,10 +12,12 @@ subprocess warms the kernel first (numba compiles or loads its cache) and times 
 "contact", a 150-element plectoneme held under its load and twist with self-contact (the
 state is made once by OLD's code, then both versions start from it), and "free", the straight
 rod twisted below its buckling onset without contact; `--cases` adds "straight", the free
-rod with self-contact switched on (no pair ever touches), and "moving", the same
+rod with self-contact switched on (no pair ever touches), "moving", the same
 plectoneme with the damping of PyElastica's PlectonemesCase (2/s, no speed-dependent drag), in
-which the strands keep moving and the near contact list is rebuilt on most steps. Prints medians and spread (min-max) per
-version and case, and the ratio new/old of the medians.
+which the strands keep moving, and "explicit", the held plectoneme with the contact dashpot
+in the force (as scripts/bench_kernel.py runs it) instead of the scene's implicit one. Prints medians and spread (min-max) per
+version and case, and the ratio new/old of the medians. `--elements` runs the same cases at
+other n (each n has its own plectoneme state, made once by OLD's code).
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import sys
 for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ[_var] = "1"
 
-STATE = "/tmp/rodphase_bench_state_150.npz"
+STATE = "/tmp/rodphase_bench_state_{n}.npz"
 
 CHILD = r"""
 import dataclasses, json, sys, time
@@ -39,19 +42,21 @@ from rodphase.rod import simulate, time_step
 from rodphase.rod.model import Stage, constant, state_from
 from rodphase.scenes import SCENES, build
 
-case, steps, state_path = sys.argv[1], int(sys.argv[2]), sys.argv[3]
-over = [("rod.elements", 150), ("loading.twist_rate", 1.0)]
+case, steps, state_path, elements = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4])
+over = [("rod.elements", elements), ("loading.twist_rate", 1.0)]
 if case == "make":
     over += [("loading.twist_density", 1.0), ("solver.hold_max_time", 2.0)]
     r = simulate(build(C.load_scene("twist_under_load", over, SCENES)))
     np.savez(state_path, positions=r.positions, directors=r.directors)
     print(json.dumps({"contacts": float(r.history["contacts"][-1])}))
     sys.exit()
-contact = case in ("contact", "moving")
+contact = case in ("contact", "moving", "explicit")
 over += [("loading.twist_density", 1.0 if contact else 0.3),
          ("physics.self_contact", case != "free")]
 if case == "moving":  # PyElastica's PlectonemesCase damping (2/s, no drag): the strands move
     over += [("solver.damping", 2.0), ("solver.quadratic_drag", 0.0)]
+if case == "explicit":  # the contact dashpot in the force, as bench_kernel.py times it
+    over += [("contact.dashpot", "explicit")]
 problem = build(C.load_scene("twist_under_load", over, SCENES))
 if contact:
     saved = np.load(state_path)
@@ -73,9 +78,10 @@ print(json.dumps({"us_per_step": 1e6 * cpu / r.diagnostics["steps"], "steps": r.
 """
 
 
-def run(root: str, case: str, steps: int) -> dict:
+def run(root: str, case: str, steps: int, n: int = 150) -> dict:
     env = dict(os.environ, PYTHONPATH=root)
-    out = subprocess.run([sys.executable, "-c", CHILD, case, str(steps), STATE], env=env, cwd="/",
+    out = subprocess.run([sys.executable, "-c", CHILD, case, str(steps), STATE.format(n=n), str(n)],
+                         env=env, cwd="/",
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -87,19 +93,23 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--cases", default="contact,free",
-                        help="comma-separated: contact, free, straight, moving")
+                        help="comma-separated: contact, free, straight, moving, explicit")
+    parser.add_argument("--elements", type=int, nargs="+", default=[150],
+                        help="rod elements n (each case is run at each n)")
     args = parser.parse_args()
-    cases = args.cases.split(",")
-    if not os.path.exists(STATE):
-        print("making the plectoneme state:", run(args.old, "make", 0))
+    cases = [f"{c}@{n}" for n in args.elements for c in args.cases.split(",")]
+    for n in args.elements:
+        if not os.path.exists(STATE.format(n=n)):
+            print(f"making the plectoneme state at n = {n}:", run(args.old, "make", 0, n))
     times = {(v, c): [] for v in ("old", "new") for c in cases}
     for r in range(args.rounds):
         order = ("old", "new") if r % 2 == 0 else ("new", "old")
         for case in cases:
+            name, n = case.split("@")
             for version in order:
-                res = run(getattr(args, version), case, args.steps)
+                res = run(getattr(args, version), name, args.steps, int(n))
                 times[version, case].append(res["us_per_step"])
-                print(f"round {r} {case:7s} {version}: {res['us_per_step']:.2f} µs/step "
+                print(f"round {r} {case:11s} {version}: {res['us_per_step']:.2f} µs/step "
                       f"({res['steps']} steps, {res['contacts']:.0f} contacts, "
                       f"near list rebuilt on {res['near_rebuilds'] / res['steps']:.0%} of steps, "
                       f"{res['status']})",
@@ -109,9 +119,9 @@ def main() -> None:
         for version in ("old", "new"):
             t = times[version, case]
             med[version] = statistics.median(t)
-            print(f"{case:7s} {version}: median {med[version]:.2f} µs/step, "
+            print(f"{case:11s} {version}: median {med[version]:.2f} µs/step, "
                   f"spread {min(t):.2f}-{max(t):.2f} ({len(t)} runs)")
-        print(f"{case:7s} new/old: {med['new'] / med['old']:.3f}")
+        print(f"{case:11s} new/old: {med['new'] / med['old']:.3f}")
 
 
 if __name__ == "__main__":

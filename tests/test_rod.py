@@ -29,7 +29,14 @@ from rodphase.rod import (
     time_step,
 )
 from rodphase.rod import kernel as K
-from rodphase.rod.contact import add_contact_forces, build_pairs, near_pairs
+from rodphase.rod.contact import (
+    DASHPOT_ROWS,
+    add_contact_forces,
+    build_pairs,
+    contact_forces,
+    contact_forces_in,
+    near_pairs,
+)
 from rodphase.rod.simulate import _rod_arrays
 from rodphase.scenes import SCENES, build
 from rodphase.theory import greenhill_clamped_moment
@@ -469,6 +476,34 @@ def test_contact_forces_are_the_gradient_of_the_contact_energy():
             xm[c, i] -= h
             numeric[c, i] = -(energy_and_force(xp)[0] - energy_and_force(xm)[0]) / (2 * h)
     assert np.abs(force - numeric).max() < 1e-6 * np.abs(force).max()
+
+
+def test_contact_forces_with_kept_buffers_match_fresh_ones():
+    # The kernel hands contact_forces_in per-element buffers it keeps from step to step; what
+    # they hold from an earlier call (another shape, another rod) must not leak into the forces.
+    rng = np.random.default_rng(7)
+    n = 30
+    s = np.arange(n + 1) * 0.01
+    x = np.ascontiguousarray(np.vstack([0.02 * np.cos(s / 0.02), 0.02 * np.sin(s / 0.02),
+                                        0.005 * s / 0.01]))
+    x += 1e-4 * rng.standard_normal(x.shape)
+    v = 1e-3 * rng.standard_normal(x.shape)
+    radius = np.full(n, 0.025)
+    pairs, count = build_pairs(x, 3, 0.2, np.empty((2, 8), dtype=np.int64))
+    k, c = np.full(n, 1e4), np.full(n, 3.0)
+    for implicit in (False, True):
+        fresh_force = np.zeros_like(x)
+        fresh_dash = np.zeros((DASHPOT_ROWS, count))
+        fresh = contact_forces(x, v, radius, pairs, count, k, c, 1.0, 0.2, 1e-4, 1.0,
+                               fresh_force, fresh_dash, implicit)
+        work = rng.standard_normal((5, n))  # stale contents
+        kept_force = np.zeros_like(x)
+        kept_dash = np.zeros((DASHPOT_ROWS, count))
+        kept = contact_forces_in(x, v, radius, pairs, count, k, c, 1.0, 0.2, 1e-4, 1.0,
+                                 kept_force, kept_dash, implicit, work[:3], work[3], work[4])
+        assert fresh[0] > 10 and fresh == kept
+        assert np.array_equal(fresh_force, kept_force)
+        assert np.array_equal(fresh_dash, kept_dash)
 
 
 def test_prescribed_end_displacement_records_the_reaction_force():

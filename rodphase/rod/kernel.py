@@ -40,7 +40,7 @@ from .contact import (
     add_body_forces,
     apply_dashpots,
     build_pairs,
-    contact_forces,
+    contact_forces_in,
     near_pairs,
 )
 from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
@@ -626,7 +626,7 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
                    radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
                    radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force,
-                   dashpots):
+                   dashpots, contact_work):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
@@ -704,9 +704,10 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
     implicit = settings.implicit_dashpot
     touching, worst, worst_at, contact_energy, noted = 0, 0.0, -1, 0.0, 0
     if n_near > 0:  # a rod far from itself (e.g. straight) skips the per-element pass too
-        touching, worst, worst_at, contact_energy, noted = contact_forces(
+        touching, worst, worst_at, contact_energy, noted = contact_forces_in(
             x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
-            settings.slip_speed, 1.0 if incompressible else 0.0, force, dashpots, implicit)
+            settings.slip_speed, 1.0 if incompressible else 0.0, force, dashpots, implicit,
+            contact_work[:3], contact_work[3], contact_work[4])
     # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
     # strand can pass around such an end, so link leaves only where the scene lets it.
     for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
@@ -1130,6 +1131,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     radius_near = rest_radius.copy()
     near = np.empty((2, pairs.shape[1]), dtype=np.int64)
     n_near = 0
+    # the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
+    contact_work = np.empty((5, n))
     # Stiff dissipative terms taken implicitly after the kick (see _axial_damping and
     # contact.apply_dashpots): the dashpots noted by the contact loop, and 1/m of the free
     # nodes as the kick scales it (0 at a node held in all three components: the impulse
@@ -1271,7 +1274,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
              noted) = _contact_loads(
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
-                near_rebuilds, max_pairs, near_margin, near_age, force, dashpots)
+                near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
