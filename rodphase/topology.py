@@ -577,6 +577,41 @@ def _history_parallel(points_history, normals_history, closed, ext, offset_fract
     return out
 
 
+# --------------------------------------------------------------------------- first compile
+
+
+def _history_signature():
+    """The argument types topology_history passes to _history_serial (C-contiguous float64)."""
+    from numba import types
+
+    frames = types.Array(types.float64, 3, "C")
+    return (frames, frames, types.boolean, types.float64, types.float64)
+
+
+def history_compiled() -> bool:
+    """Whether _history_serial, for the arrays topology_history passes, is compiled in this
+    process or in numba's disk cache (then it loads in milliseconds). True where this cannot
+    be told: the caller then compiles it in its own process, as it would anyway."""
+    sig = _history_signature()
+    if sig in _history_serial.overloads:
+        return True
+    try:
+        return _history_serial._cache.load_overload(sig, _history_serial.targetctx) is not None
+    except Exception:  # numba's cache internals changed: compile where it is used
+        return True
+
+
+def compile_history() -> None:
+    """Compile _history_serial for topology_history's arrays (and write it to numba's disk
+    cache): what a first run's topology compiles, without the kernel. rodphase.runner's
+    compile_kernel runs this in a second process while it compiles the kernel."""
+    # the LLVM options the kernel modules set (rod/_jit.py) are process-wide and were set
+    # wherever topology compiled so far (after the kernel): the same machine code here
+    from .rod import _jit  # noqa: F401
+
+    _history_serial.compile(_history_signature())
+
+
 # --------------------------------------------------------------------------- public API
 
 
