@@ -376,10 +376,12 @@ def _clean(points, normals, closed, with_normals):
         if lengths[k] <= tol:
             continue
         if c == 0 or closed:
-            nodes[c, :] = points[k, :]
+            for j in range(3):
+                nodes[c, j] = points[k, j]
         if not closed:
             k1 = k + 1 if k + 1 < n_pts else 0
-            nodes[c + 1, :] = points[k1, :]
+            for j in range(3):
+                nodes[c + 1, j] = points[k1, j]
         c += 1
     min_len = np.inf
     c = 0
@@ -422,7 +424,9 @@ def _clean(points, normals, closed, with_normals):
             else:
                 # d1 along the tangent carries no orientation: take any perpendicular
                 # rather than return NaN.
-                u[c, :] = _any_perpendicular(t[c])
+                e = _any_perpendicular(t[c])
+                for j in range(3):
+                    u[c, j] = e[j]
         c += 1
     return nodes, t, u, min_len
 
@@ -481,19 +485,25 @@ def _extend(nodes, t, closed, ext):
     if closed:
         return nodes.copy(), False, False, w0, w1
     nv = t.shape[0]
-    w0[:] = -t[0]
-    w1[:] = t[nv - 1]
+    # Element by element, here and in _clean: an array assigned to a slice makes numba
+    # compile the formatting of its shape-mismatch error, seconds of a first compile.
+    for j in range(3):
+        w0[j] = -t[0, j]
+        w1[j] = t[nv - 1, j]
     nn = nodes.shape[0]
     P = np.empty((nn + 2, 3))
-    P[1 : nn + 1] = nodes
+    for a in range(nn):
+        for j in range(3):
+            P[a + 1, j] = nodes[a, j]
     infinite = not math.isfinite(ext)
-    if infinite:
-        # Placeholders: _fill never uses the coordinates of a node at infinity.
-        P[0] = nodes[0]
-        P[nn + 1] = nodes[nn - 1]
-    else:
-        P[0] = nodes[0] + ext * w0
-        P[nn + 1] = nodes[nn - 1] + ext * w1
+    for j in range(3):
+        if infinite:
+            # Placeholders: _fill never uses the coordinates of a node at infinity.
+            P[0, j] = nodes[0, j]
+            P[nn + 1, j] = nodes[nn - 1, j]
+        else:
+            P[0, j] = nodes[0, j] + ext * w0[j]
+            P[nn + 1, j] = nodes[nn - 1, j] + ext * w1[j]
     return P, infinite, infinite, w0, w1
 
 
