@@ -13,7 +13,7 @@ demo: the three steps of `make demo` (sweep configs/quick.yaml --jobs 2, classif
 each timed (wall), with the compile seconds the sweep prints ("ready in ..."), and the CPU
 seconds of the sweep's process and the processes it waited for. run: the same for one
 scene. functions: compile_kernel in this process with a listener on numba's compile events:
-wall and CPU seconds of every compiled function (nested: a callee compiled while typing its
+wall and CPU seconds of every compiled function, the topology's first (nested: a callee compiled while typing its
 caller is indented under it and counted in the caller's time too).
 The load average (1/5/15 min) is printed before and after every repeat: the numbers are only
 comparable at a similar load.
@@ -133,20 +133,31 @@ def functions() -> None:
                               time.perf_counter() - t0, time.process_time() - c0)
 
     event.register("numba:compile", Timer())
-    load0, c0 = _load(), time.process_time()
+    load0 = _load()
+    from rodphase import topology
     from rodphase.runner import compile_kernel
 
+    # the topology first, here, so that it is timed too (compile_kernel would hand it to a
+    # second process on an empty cache)
+    c0, t0 = time.process_time(), time.perf_counter()
+    topology.compile_history()
+    print(f"topology (compile_history): {time.perf_counter() - t0:.1f} s wall, "
+          f"{time.process_time() - c0:.1f} s CPU")
+    c0 = time.process_time()
     wall = compile_kernel()
-    cpu = time.process_time() - c0 + _children_cpu()
-    print(f"compile_kernel: {wall:.1f} s wall, {cpu:.1f} s CPU (this process and the ones it "
-          f"waited for); load {load0} -> {_load()}")
+    print(f"then compile_kernel: {wall:.1f} s wall, {time.process_time() - c0:.1f} s CPU; "
+          f"load {load0} -> {_load()}")
     print("own functions (callee lines under their caller; numba's own overloads left out):")
     for depth, name, args, w, c in records:
         if name.startswith("rodphase."):
             print(f"  {'  ' * depth}{w:6.2f} s wall {c:6.2f} s CPU  {name}({args[:100]})")
-    print(f"  numba's own overloads (typed while compiling the above, counted in them): "
-          f"{sum(c for d, n, _, _, c in records if not n.startswith('rodphase.') and d == 1):.1f} s CPU "
-          "directly under a top-level function")
+    for top in [r for r in records if r[0] == 0]:
+        start = records.index(top)
+        end = next((i for i in range(start + 1, len(records)) if records[i][0] == 0),
+                   len(records))
+        own = sum(r[4] for r in records[start + 1:end]
+                  if r[0] == 1 and not r[1].startswith("rodphase."))
+        print(f"  of {top[1]}: {own:.1f} s CPU compiling numba's own overloads directly under it")
 
 
 def main(argv=None) -> int:
