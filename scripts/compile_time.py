@@ -38,6 +38,7 @@ from _common import machine  # noqa: E402
 
 
 def _env(cache: str) -> dict:
+    """The environment of a timed command: an empty numba cache, rodphase from ROOT."""
     env = dict(os.environ, NUMBA_CACHE_DIR=cache)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
     return env
@@ -165,10 +166,16 @@ def main(argv=None) -> int:
     parser.add_argument("what", choices=["demo", "run", "functions"])
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--jobs", type=int, default=2, help="sweep workers (make demo: 2)")
+    parser.add_argument("--repo", help="time the rodphase of this checkout instead (e.g. the "
+                        "main branch, for a before/after comparison); configs/quick.yaml from it")
     parser.add_argument("--keep", metavar="DIR", help="demo: copy each repeat's quick.csv here")
     args = parser.parse_args(argv)
+    if args.repo:
+        global ROOT
+        ROOT = Path(args.repo).resolve()
     m = machine()
-    print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}", flush=True)
+    print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}; rodphase from "
+          f"{ROOT}", flush=True)
     if args.what == "demo":
         demo(args.repeats, args.jobs, args.keep)
     elif args.what == "run":
