@@ -173,6 +173,9 @@ def main(argv=None) -> int:
     if args.repo:
         global ROOT
         ROOT = Path(args.repo).resolve()
+    if args.what == "functions" and ("NUMBA_CACHE_DIR" not in os.environ
+                                     or "rodphase" in sys.modules):
+        functions()  # runs itself again on an empty cache, and exits
     m = machine()
     print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}; rodphase from "
           f"{ROOT}", flush=True)
