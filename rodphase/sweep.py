@@ -93,6 +93,18 @@ class Job:
     builder: Callable | None = None
 
 
+def cpu_seconds() -> float:
+    """CPU seconds of this process and of the child processes it has waited for (the
+    compile helper of compile_kernel), user and system."""
+    total = time.process_time()
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return total
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return total + children.ru_utime + children.ru_stime
+
+
 @contextmanager
 def single_threaded_numba():
     """One level of parallelism: the pool owns the cores, numba uses one thread per worker."""
@@ -256,9 +268,11 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
                             kind="sweep", replace=replace) as store:
                 if backend == "loky":
                     echo("Compiling the kernel (once; numba caches it on disk) ...")
+                    cpu = cpu_seconds()
                     with interruptible():
                         report.compile_time = compile_kernel()
-                    echo(f"  ready in {report.compile_time:.1f} s")
+                    echo(f"  ready in {report.compile_time:.1f} s "
+                         f"(CPU {cpu_seconds() - cpu:.1f} s)")
                 start = time.perf_counter()
                 try:
                     with _pool(backend, scheduler, jobs) as pool:

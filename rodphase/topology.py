@@ -376,10 +376,12 @@ def _clean(points, normals, closed, with_normals):
         if lengths[k] <= tol:
             continue
         if c == 0 or closed:
-            nodes[c, :] = points[k, :]
+            for j in range(3):
+                nodes[c, j] = points[k, j]
         if not closed:
             k1 = k + 1 if k + 1 < n_pts else 0
-            nodes[c + 1, :] = points[k1, :]
+            for j in range(3):
+                nodes[c + 1, j] = points[k1, j]
         c += 1
     min_len = np.inf
     c = 0
@@ -422,7 +424,9 @@ def _clean(points, normals, closed, with_normals):
             else:
                 # d1 along the tangent carries no orientation: take any perpendicular
                 # rather than return NaN.
-                u[c, :] = _any_perpendicular(t[c])
+                e = _any_perpendicular(t[c])
+                for j in range(3):
+                    u[c, j] = e[j]
         c += 1
     return nodes, t, u, min_len
 
@@ -481,19 +485,25 @@ def _extend(nodes, t, closed, ext):
     if closed:
         return nodes.copy(), False, False, w0, w1
     nv = t.shape[0]
-    w0[:] = -t[0]
-    w1[:] = t[nv - 1]
+    # Element by element, here and in _clean: an array assigned to a slice makes numba
+    # compile the formatting of its shape-mismatch error, seconds of a first compile.
+    for j in range(3):
+        w0[j] = -t[0, j]
+        w1[j] = t[nv - 1, j]
     nn = nodes.shape[0]
     P = np.empty((nn + 2, 3))
-    P[1 : nn + 1] = nodes
+    for a in range(nn):
+        for j in range(3):
+            P[a + 1, j] = nodes[a, j]
     infinite = not math.isfinite(ext)
-    if infinite:
-        # Placeholders: _fill never uses the coordinates of a node at infinity.
-        P[0] = nodes[0]
-        P[nn + 1] = nodes[nn - 1]
-    else:
-        P[0] = nodes[0] + ext * w0
-        P[nn + 1] = nodes[nn - 1] + ext * w1
+    for j in range(3):
+        if infinite:
+            # Placeholders: _fill never uses the coordinates of a node at infinity.
+            P[0, j] = nodes[0, j]
+            P[nn + 1, j] = nodes[nn - 1, j]
+        else:
+            P[0, j] = nodes[0, j] + ext * w0[j]
+            P[nn + 1, j] = nodes[nn - 1, j] + ext * w1[j]
     return P, infinite, infinite, w0, w1
 
 
@@ -575,6 +585,41 @@ def _history_parallel(points_history, normals_history, closed, ext, offset_fract
         out[1, s] = tw
         out[2, s] = wr
     return out
+
+
+# --------------------------------------------------------------------------- first compile
+
+
+def _history_signature():
+    """The argument types topology_history passes to _history_serial (C-contiguous float64)."""
+    from numba import types
+
+    frames = types.Array(types.float64, 3, "C")
+    return (frames, frames, types.boolean, types.float64, types.float64)
+
+
+def history_compiled() -> bool:
+    """Whether _history_serial, for the arrays topology_history passes, is compiled in this
+    process or in numba's disk cache (then it loads in milliseconds). True where this cannot
+    be told: the caller then compiles it in its own process, as it would anyway."""
+    sig = _history_signature()
+    if sig in _history_serial.overloads:
+        return True
+    try:
+        return _history_serial._cache.load_overload(sig, _history_serial.targetctx) is not None
+    except Exception:  # numba's cache internals changed: compile where it is used
+        return True
+
+
+def compile_history() -> None:
+    """Compile _history_serial for topology_history's arrays (and write it to numba's disk
+    cache): what a first run's topology compiles, without the kernel. rodphase.runner's
+    compile_kernel runs this in a second process while it compiles the kernel."""
+    # the LLVM options the kernel modules set (rod/_jit.py) are process-wide and were set
+    # wherever topology compiled so far (after the kernel): the same machine code here
+    from .rod import _jit  # noqa: F401
+
+    _history_serial.compile(_history_signature())
 
 
 # --------------------------------------------------------------------------- public API

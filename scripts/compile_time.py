@@ -1,0 +1,192 @@
+"""First-compile cost: `make demo` and `rodphase run` on an empty numba cache, and where it goes.
+
+    python scripts/compile_time.py demo --repeats 2      # the steps of `make demo`, cold cache
+    python scripts/compile_time.py run --repeats 2       # `rodphase run twist_under_load`, cold
+    python scripts/compile_time.py functions             # seconds per compiled function
+
+Every repeat gets a new, empty NUMBA_CACHE_DIR (removed afterwards), so nothing is loaded
+from an earlier compile: neither from a cache dir nor from the __pycache__ next to the
+sources (numba writes there only without NUMBA_CACHE_DIR). The commands run this checkout's
+rodphase with this interpreter (PYTHONPATH is set to the repository root).
+
+demo: the three steps of `make demo` (sweep configs/quick.yaml --jobs 2, classify, plot),
+each timed (wall), with the compile seconds the sweep prints ("ready in ..."), and the CPU
+seconds of the sweep's process and the processes it waited for. run: the same for one
+scene. functions: compile_kernel in this process with a listener on numba's compile events:
+wall and CPU seconds of every compiled function, the topology's first (nested: a callee compiled while typing its
+caller is indented under it and counted in the caller's time too).
+The load average (1/5/15 min) is printed before and after every repeat: the numbers are only
+comparable at a similar load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "scripts"))
+from _common import machine  # noqa: E402
+
+
+def _env(cache: str) -> dict:
+    """The environment of a timed command: an empty numba cache, rodphase from ROOT."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return env
+
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _step(argv: list[str], env: dict, cwd: str) -> dict:
+    cpu0, t0 = _children_cpu(), time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "rodphase.cli", *argv], env=env, cwd=cwd,
+                          capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
+    if proc.returncode not in (0, 1):
+        sys.stderr.write(proc.stdout + proc.stderr)
+        raise SystemExit(f"{' '.join(argv)} failed ({proc.returncode})")
+    out = proc.stdout + proc.stderr
+    ready = re.search(r"ready in ([0-9.]+) s(?: \(CPU ([0-9.]+) s\))?", out)
+    runs = re.search(r"in ([0-9.]+) s \(\+ ([0-9.]+) s compiling\)", out)
+    return {"wall": wall, "cpu": cpu,
+            "compile": float(ready.group(1)) if ready else None,
+            "compile_cpu": float(ready.group(2)) if ready and ready.group(2) else None,
+            "runs": float(runs.group(1)) if runs else None}
+
+
+def _load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def demo(repeats: int, jobs: int, keep: str | None = None) -> None:
+    for r in range(repeats):
+        cache, work = tempfile.mkdtemp(prefix="numba-cold-"), tempfile.mkdtemp(prefix="demo-")
+        try:
+            env, load0 = _env(cache), _load()
+            sweep = _step(["sweep", str(ROOT / "configs/quick.yaml"), "-o", "quick.h5",
+                           "--jobs", str(jobs)], env, work)
+            classify = _step(["classify", "quick.h5", "--csv", "quick.csv"], env, work)
+            plot = _step(["plot", "quick.h5", "--kind", "phase", "-o", "quick_phase.png"], env,
+                         work)
+            print(f"demo {r + 1}/{repeats}: sweep {sweep['wall']:.1f} s wall "
+                  f"(compile {sweep['compile']} s wall, {sweep['compile_cpu']} s CPU; runs "
+                  f"{sweep['runs']} s; CPU of the sweep and its reaped children "
+                  f"{sweep['cpu']:.1f} s), classify {classify['wall']:.1f} s, plot "
+                  f"{plot['wall']:.1f} s; total {sweep['wall'] + classify['wall'] + plot['wall']:.1f} s; "
+                  f"load {load0} -> {_load()}", flush=True)
+            if keep:
+                Path(keep).mkdir(parents=True, exist_ok=True)
+                shutil.copy(Path(work) / "quick.csv", Path(keep) / f"quick_{r + 1}.csv")
+        finally:
+            shutil.rmtree(cache, ignore_errors=True)
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def run(repeats: int) -> None:
+    for r in range(repeats):
+        cache, work = tempfile.mkdtemp(prefix="numba-cold-"), tempfile.mkdtemp(prefix="run-")
+        try:
+            env, load0 = _env(cache), _load()
+            step = _step(["run", "twist_under_load", "-o", "run.h5"], env, work)
+            print(f"run {r + 1}/{repeats}: {step['wall']:.1f} s wall (compile {step['compile']} s "
+                  f"wall, {step['compile_cpu']} s CPU), CPU of the process and its children "
+                  f"{step['cpu']:.1f} s; load {load0} -> {_load()}", flush=True)
+        finally:
+            shutil.rmtree(cache, ignore_errors=True)
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def functions() -> None:
+    """compile_kernel here, on a fresh cache, with every compile of a dispatcher timed."""
+    if "NUMBA_CACHE_DIR" not in os.environ or "rodphase" in sys.modules:
+        cache = tempfile.mkdtemp(prefix="numba-cold-")
+        try:
+            proc = subprocess.run([sys.executable, __file__, "functions"], env=_env(cache))
+        finally:
+            shutil.rmtree(cache, ignore_errors=True)
+        raise SystemExit(proc.returncode)
+    from numba.core import event
+
+    records, stack = [], []
+
+    class Timer(event.Listener):
+        def on_start(self, ev):
+            records.append(None)  # filled in at the end: callers come before their callees
+            stack.append((len(records) - 1, time.perf_counter(), time.process_time()))
+
+        def on_end(self, ev):
+            index, t0, c0 = stack.pop()
+            f = ev.data["dispatcher"].py_func
+            records[index] = (len(stack), f"{f.__module__}.{f.__qualname__}",
+                              ", ".join(map(str, ev.data["args"])),
+                              time.perf_counter() - t0, time.process_time() - c0)
+
+    event.register("numba:compile", Timer())
+    load0 = _load()
+    from rodphase import topology
+    from rodphase.runner import compile_kernel
+
+    # the topology first, here, so that it is timed too (compile_kernel would hand it to a
+    # second process on an empty cache)
+    c0, t0 = time.process_time(), time.perf_counter()
+    topology.compile_history()
+    print(f"topology (compile_history): {time.perf_counter() - t0:.1f} s wall, "
+          f"{time.process_time() - c0:.1f} s CPU")
+    c0 = time.process_time()
+    wall = compile_kernel()
+    print(f"then compile_kernel: {wall:.1f} s wall, {time.process_time() - c0:.1f} s CPU; "
+          f"load {load0} -> {_load()}")
+    print("own functions (callee lines under their caller; numba's own overloads left out):")
+    for depth, name, args, w, c in records:
+        if name.startswith("rodphase."):
+            print(f"  {'  ' * depth}{w:6.2f} s wall {c:6.2f} s CPU  {name}({args[:100]})")
+    for top in [r for r in records if r[0] == 0]:
+        start = records.index(top)
+        end = next((i for i in range(start + 1, len(records)) if records[i][0] == 0),
+                   len(records))
+        own = sum(r[4] for r in records[start + 1:end]
+                  if r[0] == 1 and not r[1].startswith("rodphase."))
+        print(f"  of {top[1]}: {own:.1f} s CPU compiling numba's own overloads directly under it")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("what", choices=["demo", "run", "functions"])
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--jobs", type=int, default=2, help="sweep workers (make demo: 2)")
+    parser.add_argument("--repo", help="time the rodphase of this checkout instead (e.g. the "
+                        "main branch, for a before/after comparison); configs/quick.yaml from it")
+    parser.add_argument("--keep", metavar="DIR", help="demo: copy each repeat's quick.csv here")
+    args = parser.parse_args(argv)
+    if args.repo:
+        global ROOT
+        ROOT = Path(args.repo).resolve()
+    if args.what == "functions" and ("NUMBA_CACHE_DIR" not in os.environ
+                                     or "rodphase" in sys.modules):
+        functions()  # runs itself again on an empty cache, and exits
+    m = machine()
+    print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}; rodphase from "
+          f"{ROOT}", flush=True)
+    if args.what == "demo":
+        demo(args.repeats, args.jobs, args.keep)
+    elif args.what == "run":
+        run(args.repeats)
+    else:
+        functions()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
