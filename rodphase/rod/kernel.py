@@ -674,7 +674,11 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             near = np.empty((2, pairs.shape[1]), dtype=np.int64)
         if settings.implicit_dashpot and dashpots.shape[1] < near.shape[1] + 2 * (n + 1):
             dashpots = np.empty((DASHPOT_ROWS, near.shape[1] + 2 * (n + 1)))
-        x_build[:, :] = x
+        # copies element by element here and below: an array-to-slice assignment makes numba
+        # compile the formatting of its shape-mismatch error, ~3 s of the first compile
+        for c in range(3):
+            for i in range(n + 1):
+                x_build[c, i] = x[c, i]
         rebuilds += 1
         max_pairs = max(max_pairs, n_pairs)
         moved_near = np.inf
@@ -697,8 +701,11 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             elif near_age > 64:
                 near_margin = max(0.5 * near_margin, near_skin)
         n_near = near_pairs(x, radius, pairs, n_pairs, near_margin, near)
-        x_near[:, :] = x
-        radius_near[:] = radius
+        for c in range(3):
+            for i in range(n + 1):
+                x_near[c, i] = x[c, i]
+        for i in range(n):
+            radius_near[i] = radius[i]
         near_rebuilds += 1
         near_age = 0
     implicit = settings.implicit_dashpot
@@ -1022,7 +1029,9 @@ def _probe_distance(x, probe_reference, probe_shape, probe_size, probe_norm2):
 def _start_probe(x, probe_reference, probe_shape, probe_size):
     """Displace the candidate equilibrium by probe_size along probe_shape."""
     n = x.shape[1] - 1
-    probe_reference[:, :] = x
+    for c in range(3):
+        for i in range(n + 1):
+            probe_reference[c, i] = x[c, i]
     for c in range(3):
         for i in range(n + 1):
             x[c, i] += probe_size * probe_shape[c, i]
