@@ -11,6 +11,11 @@ rate, and once at the scene's rate with the finer reference settings (n = 140, s
 then reports per rate: steps summed over the runs (a measure of work that does not depend on
 the machine or its load), the runs' own times summed, the sweep's wall time, statuses, and label agreement with the
 reference point by point. Stores go to out/ramp/ and are resumed when rerun.
+
+Since 2026-12-03 the config starts its runs on the straight branch (loading.quasi_static_below
+0.8), so the rate variants ramp from 0.8 of the buckling twist; the reference keeps the whole
+protocol. The table in docs/performance.md was measured before, with the whole protocol in
+every row; add `--set`-style overrides in REFERENCE_SET's manner to compare like with like.
 """
 
 from __future__ import annotations
