@@ -15,7 +15,7 @@ reference point by point. Stores go to out/ramp/ and are resumed when rerun.
 Since 2026-12-03 the config starts its runs on the straight branch (loading.quasi_static_below
 0.8), so the rate variants ramp from 0.8 of the buckling twist; the reference keeps the whole
 protocol. The table in docs/performance.md was measured before, with the whole protocol in
-every row; add `--set`-style overrides in REFERENCE_SET's manner to compare like with like.
+every row (to repeat it, add "loading.quasi_static_below=0" to each rate's sets in main()).
 """
 
 from __future__ import annotations
