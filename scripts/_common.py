@@ -1,4 +1,5 @@
-"""What the study scripts share: the machine they ran on and updating a Markdown block."""
+"""What the study scripts share: the machine they ran on, updating a Markdown block, and
+reading sweep stores point by point."""
 
 from __future__ import annotations
 
@@ -28,3 +29,20 @@ def write_block(doc: Path, name: str, text: str) -> None:
         body += f"\n{begin}\n{text}\n{end}\n"
     doc.write_text(body)
     print(f"updated {doc} ({name})")
+
+
+def sweep_table(path: Path):
+    """The classified table of a sweep store, in run order. Sweeps of one config with the same
+    sampler and seed draw the same points in the same order, so the i-th rows of two such
+    tables are the same point (check it with same_points)."""
+    import rodphase
+
+    return rodphase.table(path).sort_values("run_id").reset_index(drop=True)
+
+
+def same_points(a, b, axes=("twist_density", "extension")) -> bool:
+    """Whether the first rows of two sweep tables are the same points, on the axes both have."""
+    import numpy as np
+
+    n = min(len(a), len(b))
+    return all(np.allclose(a[k][:n], b[k][:n], rtol=1e-9) for k in axes if k in a and k in b)

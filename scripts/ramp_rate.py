@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
+from _common import machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "ramp"
@@ -57,13 +57,6 @@ def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> float:
     return float("nan") if resumed else time.perf_counter() - t0
 
 
-def table(path: Path):
-    import rodphase
-
-    # same sampler and seed: the i-th run is the same point in every store (checked below)
-    return rodphase.table(path).sort_values("run_id").reset_index(drop=True)
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=40)
@@ -80,19 +73,16 @@ def main() -> int:
         path = OUT / f"rate_{rate:g}_{args.samples}.h5"
         walls[rate] = sweep(path, [f"loading.twist_rate={rate:g}"], args.samples, args.jobs)
 
-    ref = table(ref_path)
-    keys = [k for k in ("twist_density", "extension") if k in ref]
+    ref = sweep_table(ref_path)
     rows = ["| twist rate [turns/s] | runs | steps [M] | run time [s] | sweep wall [s] | statuses | "
             "labels as the reference | disagreeing points (Φa, L/L0: this → reference) |",
             "|---|---|---|---|---|---|---|---|"]
     for name in ["reference"] + rates:
         path = ref_path if name == "reference" else OUT / f"rate_{name:g}_{args.samples}.h5"
-        t = table(path)
+        t = sweep_table(path)
         cpu = float(np.nansum(t["wall_time"]))  # each run's own time in its worker
         statuses = ", ".join(f"{k} {v}" for k, v in t["status"].value_counts().sort_index().items())
-        same = [np.allclose([a[k] for k in keys], [b[k] for k in keys], rtol=1e-9)
-                for (_, a), (_, b) in zip(t.iterrows(), ref.iterrows())]
-        if not all(same):
+        if not same_points(t, ref):
             raise SystemExit(f"{path}: its points are not the reference's")
         agree = (t["phase"].to_numpy() == ref["phase"].to_numpy())
         differ = "; ".join(f"{a['twist_density']:.2f}, {a['extension']:.3f}: {a['phase']} → "

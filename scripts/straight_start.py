@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
+from _common import machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "straight"
@@ -58,18 +58,6 @@ def fresh_sweep(path: Path, sets: list[str], jobs: int) -> float:
     return wall
 
 
-def table(path: Path):
-    import rodphase
-
-    # same sampler and seed: the i-th run is the same point in every store (checked below)
-    return rodphase.table(path).sort_values("run_id").reset_index(drop=True)
-
-
-def same_points(a, b) -> bool:
-    n = min(len(a), len(b))
-    return all(np.allclose(a[k][:n], b[k][:n], rtol=1e-9) for k in ("twist_density", "extension"))
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=200)
@@ -95,15 +83,15 @@ def main() -> int:
             sets = common + [f"loading.quasi_static_below={v:g}"]
             walls[v].append(fresh_sweep(OUT / f"fig3_{v:g}.h5", sets, args.jobs))
 
-    base = table(OUT / f"fig3_{variants[0]:g}.h5")
-    ref = table(args.reference) if args.reference.exists() else None
+    base = sweep_table(OUT / f"fig3_{variants[0]:g}.h5")
+    ref = sweep_table(args.reference) if args.reference.exists() else None
     if ref is not None and not same_points(base, ref):
         raise SystemExit(f"{args.reference}: its points are not this sweep's")
     rows = ["| quasi_static_below | runs | steps [M] | sweep wall [s] | statuses | labels as "
             f"S = {variants[0]:g} | max \\|ΔWr\\| [turns] | max \\|ΔLk\\| [turns] | max \\|Δ L/L0\\| | "
             "labels as the n = 140 reference |", "|---|---|---|---|---|---|---|---|---|---|"]
     for v in variants:
-        t = table(OUT / f"fig3_{v:g}.h5")
+        t = sweep_table(OUT / f"fig3_{v:g}.h5")
         if not same_points(t, base):
             raise SystemExit(f"variant {v}: its points are not the first variant's")
         statuses = ", ".join(f"{k} {c}" for k, c in t["status"].value_counts().sort_index().items())
