@@ -179,9 +179,9 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
     onset = straight_rod_buckling_turns(force, rod.youngs_modulus, rod.shear_modulus,
                                         rod.radius, rod.length)
     turns = math.copysign(min(abs(first_target), fraction * onset), first_target)
-    stretch = units.extension_under_load(rod.youngs_modulus, rod.radius, force)
     twisted = straight_state(rod, twist_turns=turns)
-    twisted.x *= stretch  # along the axis from the origin: every element stretched to e
+    # along the axis from the origin: every element stretched to the load's extension e
+    twisted.x *= C.straight_extension(cfg)
     # the untwisted straight rod's frames are all alike, and so are its clamp frames (what
     # clamp_frames extrapolates from them, exactly: the rotation between elements is none)
     untwisted = np.ascontiguousarray(straight_state(rod).Q[:, :, 0])
