@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from . import config as C
-from .rod.model import Controls, Problem, RodState, Table
+from .rod.model import Controls, Problem, RodState, Table, state_from
 
 KEY = "initial_state"
 RESTARTABLE = ("ok", "not_converged")
@@ -185,10 +185,10 @@ def clamp_reference(stored: StoredState, axis) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _state(stored: StoredState) -> RodState:
-    x = np.ascontiguousarray(stored.positions.T)
-    return RodState(stored.time, x, np.ascontiguousarray(stored.velocities.T),
-                    np.ascontiguousarray(np.transpose(stored.directors, (1, 2, 0))),
-                    np.ascontiguousarray(stored.angular_velocities.T))
+    state = state_from(stored.positions, stored.directors, stored.time)
+    state.v[:] = stored.velocities.T
+    state.w[:] = stored.angular_velocities.T
+    return state
 
 
 def continue_from(problem: Problem, stored: StoredState) -> Problem:
