@@ -101,8 +101,7 @@ def run(scene, output, sets, force):
     # be written is refused before it costs anything
     with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
                     version=__version__, kind="run", replace=force) as store:
-        from .runner import compile_kernel
-        from .sweep import cpu_seconds
+        from .runner import compile_kernel, cpu_seconds
 
         click.echo("Compiling the kernel (once; numba caches it on disk) ...")
         cpu = cpu_seconds()

@@ -184,6 +184,18 @@ def run_scene(scene, *, topology: bool | None = None,
     return result
 
 
+def cpu_seconds() -> float:
+    """CPU seconds of this process and of the child processes it has waited for (the
+    compile helper of compile_kernel), user and system."""
+    total = time.process_time()
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return total
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return total + children.ru_utime + children.ru_stime
+
+
 def compile_kernel() -> float:
     """Run a tiny problem through every compiled function a run uses, in this process, and
     return the seconds it took. numba writes the machine code to its disk cache, so workers

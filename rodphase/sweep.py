@@ -28,7 +28,7 @@ from . import __version__
 from . import config as C
 from .result import RunResult
 from .rod.simulate import current_radii
-from .runner import compile_kernel, keep_snapshots, run_scene, snapshot_policy
+from .runner import compile_kernel, cpu_seconds, keep_snapshots, run_scene, snapshot_policy
 
 log = logging.getLogger(__name__)
 
@@ -91,18 +91,6 @@ class Job:
     # a scene builder registered at run time (not one of rodphase's): the workers are other
     # processes that never saw the registration, so the job carries it
     builder: Callable | None = None
-
-
-def cpu_seconds() -> float:
-    """CPU seconds of this process and of the child processes it has waited for (the
-    compile helper of compile_kernel), user and system."""
-    total = time.process_time()
-    try:
-        import resource
-    except ImportError:  # not on Windows
-        return total
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return total + children.ru_utime + children.ru_stime
 
 
 @contextmanager
