@@ -388,6 +388,8 @@ class _LocalPool:
     def _get(self):
         from joblib.externals.loky import get_reusable_executor
 
+        if self._executor is None:
+            _quiet_resource_tracker()
         # a broken executor (a worker died) is replaced by a new one here
         self._executor = get_reusable_executor(
             max_workers=self.workers, initializer=_worker_start, initargs=(os.getpid(),),
@@ -456,6 +458,29 @@ def _worker_start(parent_pid: int) -> None:
             ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
     if os.getppid() != parent_pid:  # the parent died before the line above took effect
         os._exit(1)
+
+
+def _quiet_resource_tracker() -> None:
+    """Start loky's resource tracker with its stderr on /dev/null, unless it already runs.
+
+    The tracker is a helper process that outlives the workers and inherits the parent's
+    stderr (fd 2). When a stop kills the workers it can print a KeyError traceback about a
+    semaphore it no longer knows (joblib issue #1091), after a stop that was clean: a
+    user who pressed Ctrl-C would read it as a crash. What it tracks is cleaned up all
+    the same."""
+    try:
+        from joblib.externals.loky.backend import resource_tracker
+    except ImportError:  # another joblib layout: its tracker starts as it always did
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            resource_tracker.ensure_running()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 @contextmanager

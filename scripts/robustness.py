@@ -562,8 +562,7 @@ def output_problems(res: Result, *, rc: int | tuple | None = None, error_names=(
         problems.append(f"exit {res.rc}, expected {' or '.join(map(str, wanted))} "
                         f"(last line: {said[0][:160]!r})")
     if traceback and "Traceback" in res.text:
-        last = [ln for ln in res.err.splitlines() if ln.strip()][-1:] or ["?"]
-        problems.append(f"Traceback ({last[0].strip()[:160]})")
+        problems.append(traceback_report(res.text))
     if one_error:
         errors = res.error_lines()
         if len(errors) != 1:
@@ -717,6 +716,22 @@ def _start_and_wait_for_workers(lab: Lab, name: str, cfg: Path, out: Path, d: Pa
     return bg, []
 
 
+def traceback_report(text: str) -> str:
+    """A Traceback in printed text, whole: where it starts, its frames and its exception (a
+    rare one, e.g. from a helper process sharing the stderr, must be diagnosable from the
+    report alone)."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if "Traceback" in ln)
+    block = [lines[start]]
+    for ln in lines[start + 1:]:
+        block.append(ln)
+        if ln and not ln.startswith(" "):  # the exception line ends the block
+            break
+    before = lines[start - 1].strip()[:160] if start > 0 else ""
+    return ("Traceback" + (f" after {before!r}" if before else "") + ":\n        "
+            + "\n        ".join(ln[:200] for ln in block[-12:]))
+
+
 def case_signal(lab: Lab, sig: int, repeats: int = 1) -> list[Outcome]:
     """SIGINT/SIGTERM to the parent mid-sweep: exit 130/143 within 15 s with a resume hint
     and no Traceback; none of its workers alive 15 s after the signal; the store opens and
@@ -750,8 +765,7 @@ def case_signal(lab: Lab, sig: int, repeats: int = 1) -> list[Outcome]:
                 tail = " | ".join(res.text.strip().splitlines()[-2:])[:200]
                 problems.append(f"no line saying {RESUME_HINT!r} (printed: {tail!r})")
             if "Traceback" in res.err:
-                last = [ln for ln in res.err.splitlines() if ln.strip()][-1:] or ["?"]
-                problems.append(f"Traceback ({last[0].strip()[:160]})")
+                problems.append(traceback_report(res.err))
             if problems and rc is not None:
                 problems.insert(0, f"exited after {took:.1f} s")
             info = lab.inspect(out)
