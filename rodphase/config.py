@@ -277,6 +277,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         # explicit | implicit: how the contact dashpot is integrated (see Contact.dashpot)
         "dashpot": _engine("Contact", "dashpot"),
         "exclusion": _engine("Contact", "exclusion"),
+        # pairs inside the exclusion kept from folding tighter than the rod (no self-passage)
+        "fold": _engine("Contact", "fold"),
         "skin": _engine("Contact", "skin"),
         "near_skin": _engine("Contact", "near_skin"),
         "penetration_limit": _engine("Contact", "penetration_limit"),
@@ -748,6 +750,10 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     ("contact", "dashpot"): "explicit",  # issue #13: implicit contact dashpot
     ("solver", "strain_rate_damping"): 0.0,  # issue #13: axial Kelvin–Voigt damping
     ("loading", "quasi_static_below"): 0.0,  # issue #16: quasi-static straight start
+    # fold contact (no self-passage inside the exclusion): on by default, so every config's
+    # hash moved with it; a store written before it is not resumed by the new physics, and
+    # contact.fold: false hashes (and runs) as before
+    ("contact", "fold"): False,
 }
 
 

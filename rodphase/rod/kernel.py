@@ -41,6 +41,7 @@ from .contact import (
     apply_dashpots,
     build_pairs,
     contact_forces_in,
+    fold_forces,
     near_pairs,
 )
 from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
@@ -99,6 +100,7 @@ Settings = namedtuple("Settings", [
     "drag_radius",  # m: lever that turns spin into a surface speed for the quadratic drag
     "contact",  # bool: self-contact on
     "exclusion",  # int: elements closer than this along the rod never touch
+    "fold",  # bool: pairs inside the exclusion kept from folding tighter than the rod (fold_forces)
     "implicit_dashpot",  # bool: contact dashpots as backward-Euler impulses after the kick
     "friction",  # Coulomb coefficient
     "slip_speed",  # m/s, below it friction is viscous
@@ -626,7 +628,7 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
                    radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
                    radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force,
-                   dashpots, contact_work):
+                   dashpots, contact_work, fold_arc, fold_next):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
@@ -634,7 +636,9 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
     touching) when gaps could have closed by near_margin since x_near / radius_near.
     The margin adapts to how fast the rod moves (see below), between near_skin and skin/2.
     With settings.implicit_dashpot the dashpots are noted in `dashpots` (regrown with the
-    lists) for apply_dashpots after the kick instead of entering `force`.
+    lists) for apply_dashpots after the kick instead of entering `force`. With settings.fold
+    the pairs inside the exclusion are kept from folding through each other (fold_forces,
+    work buffers fold_arc and fold_next).
     Returns the lists and their counters, then (touching pairs, largest overlap / radius,
     its element, contact energy, the dashpot buffer, dashpots noted in it).
     """
@@ -715,6 +719,13 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
             settings.slip_speed, 1.0 if incompressible else 0.0, force, dashpots, implicit,
             contact_work[:3], contact_work[3], contact_work[4])
+    if settings.fold:
+        fold_touching, fold_worst, fold_at, fold_energy = fold_forces(
+            x, radius, lengths, exclusion, contact_k, f_stiff, fold_arc, fold_next, force)
+        touching += fold_touching
+        contact_energy += fold_energy
+        if fold_worst > worst:
+            worst, worst_at = fold_worst, fold_at
     # The bodies the held ends are fixed to (a loading rod, the clamp's holder): no
     # strand can pass around such an end, so link leaves only where the scene lets it.
     for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
@@ -1142,6 +1153,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     n_near = 0
     # the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
     contact_work = np.empty((5, n))
+    fold_arc = np.empty(n + 1)
+    fold_next = np.empty(n + 1, dtype=np.int64)
     # Stiff dissipative terms taken implicitly after the kick (see _axial_damping and
     # contact.apply_dashpots): the dashpots noted by the contact loop, and 1/m of the free
     # nodes as the kick scales it (0 at a node held in all three components: the impulse
@@ -1283,7 +1296,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
              noted) = _contact_loads(
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
-                near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work)
+                near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work,
+                fold_arc, fold_next)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
