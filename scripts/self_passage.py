@@ -12,9 +12,13 @@ at the usual history interval to find the jumps, then again with a history row e
 Gauss writhe of every pair of the rod's own segments (Klenin & Langowski's solid angle) in
 the rows before and after it. A crossing of two segments changes the rod's own writhe by
 about ±2 in one row (in one pair, or split between the pairs of a shared node); a jump
-that the rod's own writhe does not make crossed the closure beyond an end. Prints one line per jump: time, ΔLk, ΔWr of the rod alone, the pair
-that changed most, its distance along the rod and whether it lies inside the contact
-exclusion (where neighbours never repel).
+in which the twist jumps by about ±1 instead is a twist wrap (a director turned by more
+than half a turn against its neighbour's about the centreline: Tw = Σ of those angles, each
+in (−π, π]); one that neither makes crossed the closure beyond an end, and for it the script
+also prints each end's tilt from the axis and the node nearest to its closing ray. Prints
+one line per jump: time, ΔLk, ΔWr of the rod alone, the pair that changed most, its
+distance along the rod and whether it lies inside the contact exclusion (where neighbours
+never repel), and the verdict.
 """
 
 from __future__ import annotations
@@ -94,12 +98,67 @@ def main() -> int:
             f" the contact exclusion ({exclusion} elements)"
         # a crossing may fall on a node two segments share, splitting its ±2 between pairs:
         # the rod's own writhe jumping in one row is the test, the pair only says where
-        kind = ("self-passage" if abs(change.sum()) > 1.0
-                else "around an end (the rod's own writhe did not jump)")
+        twist_jump = h["twist"][k] - h["twist"][k - 1]
+        if abs(change.sum()) > 1.0:
+            kind = "self-passage"
+        elif abs(twist_jump) > 0.5:
+            kind = (f"twist wrap (Tw jumped {twist_jump:+.2f}: somewhere a director turned by "
+                    "more than half a turn against its neighbour's, measured about the "
+                    "centreline; a sheared or under-resolved rod)")
+        else:
+            kind = "around an end (neither the rod's own writhe nor its twist jumped)"
         print(f"t = {h['time'][k]:.4f} s: ΔLk {h['link'][k] - h['link'][k - 1]:+.2f}, "
               f"ΔWr of the rod {change.sum():+.2f}; largest pair change {change[m]:+.2f} at "
               f"elements {i[m]} and {j[m]} ({j[m] - i[m]} apart, {where}): {kind}")
+        if kind.startswith("around an end"):
+            for line in near_the_ends(shapes[rows[k - 1]], shapes[rows[k]], problem, exclusion):
+                print("    " + line)
     return 0
+
+
+def near_the_ends(before: np.ndarray, after: np.ndarray, problem, exclusion: int) -> list[str]:
+    """What passed an end between two rows: per end, the tilt of its end element from the
+    axis (the writhe's closure is a ray along the end tangent), and the node that came
+    nearest to that ray (outside the end element itself) in the later row: its element,
+    its height beyond the end node along the axis, its distance from the axis line (the end
+    body is a cylinder of body_radius about that line beyond the end), and whether it lies
+    within the contact exclusion of the end, where the body does not push it."""
+    axis = np.asarray(problem.ends.axis, dtype=float)
+    axis = axis / np.linalg.norm(axis)
+    body = problem.ends.body_radius * problem.rod.radius
+    lines = []
+    n = len(after) - 1
+    for name, end, inward, side in (("start", 0, 1, -1.0), ("end", n, n - 1, 1.0)):
+        out = side * axis
+        tilts = []
+        for x in (before, after):
+            tangent = x[end] - x[inward]
+            tangent /= np.linalg.norm(tangent)
+            tilts.append(math.degrees(math.acos(np.clip(tangent @ out, -1.0, 1.0))))
+        tangent = after[end] - after[inward]
+        tangent /= np.linalg.norm(tangent)
+        r = after - after[end]
+        along = r @ tangent
+        off_ray = np.linalg.norm(r - np.outer(along, tangent), axis=1)
+        off_ray[along <= 0.0] = np.inf  # behind the end node: not beside its ray
+        off_ray[[end, inward]] = np.inf
+        if not np.isfinite(off_ray).any():
+            lines.append(f"{name}: end element {tilts[0]:.1f} -> {tilts[1]:.1f} deg from the "
+                         "axis; no node beyond the end along its ray")
+            continue
+        nearest = int(np.argmin(off_ray))
+        height = float(r[nearest] @ out)
+        from_axis = float(np.linalg.norm(r[nearest] - height * out))
+        exempt = abs(nearest - end) <= exclusion
+        lines.append(
+            f"{name}: end element {tilts[0]:.1f} -> {tilts[1]:.1f} deg from the axis; nearest "
+            f"node to its ray: {nearest} ({abs(nearest - end)} from the end, "
+            f"{'inside' if exempt else 'outside'} the exclusion), "
+            f"{off_ray[nearest] / problem.rod.radius:.2f} a from the ray, "
+            f"{height / problem.rod.radius:+.2f} a beyond the end along the axis, "
+            f"{from_axis / problem.rod.radius:.2f} a from the axis line "
+            f"(body radius {body / problem.rod.radius:.2f} a)")
+    return lines
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ seconds once numba's cache is warm.
 
 import dataclasses
 import math
+import re
 import warnings
 
 import numpy as np
@@ -421,6 +422,36 @@ def test_a_time_step_above_the_bound_is_caught_and_recorded():
     assert result.diagnostics["dt"] == pytest.approx(3 * bound)
     # nothing is written as if it were a result: history stops where the guard tripped
     assert result.diagnostics["steps"] < 2000
+
+
+@pytest.mark.parametrize("degrees, stops", [(50.0, True), (40.0, False)])
+def test_an_element_sheared_past_45_degrees_stops_the_run_there(degrees, stops):
+    # A straight rod whose element 7 has its frame turned about d1 by `degrees` off its
+    # tangent: past 45° the shear guard stops the run at the first check (a rod model does
+    # not describe it, and the ribbon d1 then lies near the centreline, whose twist about
+    # it can wrap); at 40° it runs on, the shear relaxing.
+    rod = Rod(length=1.0, radius=0.025, elements=20)
+    state = straight_state(rod)
+    positions, directors = state.positions, state.directors.copy()  # (n, 3, 3): d1 d2 d3
+    angle = math.radians(degrees)
+    d2, d3 = directors[7, 1].copy(), directors[7, 2].copy()
+    directors[7, 1] = math.cos(angle) * d2 - math.sin(angle) * d3
+    directors[7, 2] = math.sin(angle) * d2 + math.cos(angle) * d3
+    from rodphase.rod.model import state_from
+
+    problem = Problem(rod=rod, state=state_from(positions, directors), ends=Ends(),
+                      solver=Solver(check_interval=1), stages=(Stage(1e-3),))
+    result = simulate(problem)
+    if stops:
+        assert result.status == "unstable" and result.diagnostics["guard"] == "shear"
+        found = re.search(r"sheared by more than 45° .* at element (\d+) \(value ([0-9.]+)\)",
+                          result.message)
+        assert found, result.message
+        assert int(found.group(1)) == 7
+        # the angle in rad, printed to 3 digits; the first check is one step in
+        assert math.degrees(float(found.group(2))) == pytest.approx(degrees, abs=1.0)
+    else:
+        assert result.ok, result.message
 
 
 def test_automatic_time_step_is_stable_over_many_steps():

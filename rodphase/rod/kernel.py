@@ -174,6 +174,10 @@ N_HISTORY = len(HISTORY_COLUMNS)
 # cos 135°: neighbouring frames (and an end frame and its clamp) turned further apart than
 # this bring the matrix log near its branch cut at 180°, where twist would silently wrap
 COS_MAX_TURN = -0.7071
+# cos 45°: an element whose frame's d3 is this far off its tangent is sheared beyond what a
+# rod model describes (the paper's rods shear by well under a degree); the director then lies
+# near the centreline, whose twist about it wraps, and link is lost to a numerical runaway
+COS_MAX_SHEAR = 0.7071
 
 # status codes advance returns
 S_COMPLETED = 0
@@ -183,6 +187,7 @@ S_SPEED = 3
 S_PENETRATION = 4
 S_RESOLUTION = 5  # neighbouring frames turned by more than 135°: the rod is under-resolved
 S_CLAMP_LAG = 6  # an end frame lags its turning clamp by more than 135°: twisted too fast
+S_SHEAR = 7  # an element sheared by more than 45°: a runaway, not a rod
 
 # The guards, one row each (as diffrax's RESULTS): the short name for diagnostics["guard"]
 # (what a caller may act on), what tripped, where info[D_WHERE] points, and what to change.
@@ -200,6 +205,8 @@ GUARDS = {
     S_CLAMP_LAG: Guard("clamp_lag", "end frame lagging its turning clamp by more than 135°",
                        "element", "The twist is put in faster than it spreads along the rod: "
                        "lower loading.twist_rate (turns/s)."),
+    S_SHEAR: Guard("shear", "element sheared by more than 45° (its frame's d3 that far off "
+                   "its tangent)", "element", _STEP_ADVICE + " Or use more rod.elements."),
 }
 
 # What advance reports besides the history, one row each (name, meaning); info[D_*] slots
@@ -628,7 +635,7 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
                    radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
                    radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force,
-                   dashpots, contact_work, fold_arc, fold_next):
+                   dashpots, contact_work, fold_reach):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
@@ -637,8 +644,8 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
     The margin adapts to how fast the rod moves (see below), between near_skin and skin/2.
     With settings.implicit_dashpot the dashpots are noted in `dashpots` (regrown with the
     lists) for apply_dashpots after the kick instead of entering `force`. With settings.fold
-    the pairs inside the exclusion are kept from folding through each other (fold_forces,
-    work buffers fold_arc and fold_next).
+    the nodes inside the exclusion are kept from folding through each other (fold_forces,
+    work buffer fold_reach).
     Returns the lists and their counters, then (touching pairs, largest overlap / radius,
     its element, contact energy, the dashpot buffer, dashpots noted in it).
     """
@@ -721,7 +728,7 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             contact_work[:3], contact_work[3], contact_work[4])
     if settings.fold:
         fold_touching, fold_worst, fold_at, fold_energy = fold_forces(
-            x, radius, lengths, exclusion, contact_k, f_stiff, fold_arc, fold_next, force)
+            x, radius, rod.rest_length, exclusion, contact_k, f_stiff, fold_reach, force)
         touching += fold_touching
         contact_energy += fold_energy
         if fold_worst > worst:
@@ -907,6 +914,26 @@ def _guards(v, w, force, torque, ends, node_mass, inertia, rest_length, r2, spee
         info[D_VALUE] = kin
         return S_NAN, res, kin
     return S_COMPLETED, res, kin
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _shear_guard(x, Q, info):
+    """S_SHEAR if an element's d3 is more than 45° off its tangent (info: where, the angle
+    in rad), else S_COMPLETED. Checked with the other guards, every check_every steps."""
+    n = Q.shape[2]
+    for i in range(n):
+        t0 = x[0, i + 1] - x[0, i]
+        t1 = x[1, i + 1] - x[1, i]
+        t2 = x[2, i + 1] - x[2, i]
+        along = Q[2, 0, i] * t0 + Q[2, 1, i] * t1 + Q[2, 2, i] * t2
+        # d3·t/|t| < cos 45°, without the root (a reversed element fails it too)
+        if along < 0.0 or along * along < COS_MAX_SHEAR * COS_MAX_SHEAR * (
+                t0 * t0 + t1 * t1 + t2 * t2):
+            info[D_WHERE] = i
+            info[D_VALUE] = np.arccos(min(max(along / np.sqrt(t0 * t0 + t1 * t1 + t2 * t2),
+                                              -1.0), 1.0))
+            return S_SHEAR
+    return S_COMPLETED
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
@@ -1153,8 +1180,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     n_near = 0
     # the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
     contact_work = np.empty((5, n))
-    fold_arc = np.empty(n + 1)
-    fold_next = np.empty(n + 1, dtype=np.int64)
+    fold_reach = np.empty(settings.exclusion + 1)
     # Stiff dissipative terms taken implicitly after the kick (see _axial_damping and
     # contact.apply_dashpots): the dashpots noted by the contact loop, and 1/m of the free
     # nodes as the kick scales it (0 at a node held in all three components: the impulse
@@ -1297,7 +1323,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
                 near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work,
-                fold_arc, fold_next)
+                fold_reach)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -1340,6 +1366,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         if check or record:
             status, res, kin = _guards(v, w, force, torque, ends, node_mass, inertia, rest_length,
                                        r2, speed_limit, info)
+            if status == S_COMPLETED:
+                status = _shear_guard(x, Q, info)
             if status != S_COMPLETED:
                 break
             residual = res / force_scale
