@@ -277,7 +277,7 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         # explicit | implicit: how the contact dashpot is integrated (see Contact.dashpot)
         "dashpot": _engine("Contact", "dashpot"),
         "exclusion": _engine("Contact", "exclusion"),
-        # pairs inside the exclusion kept from folding tighter than the rod (no self-passage)
+        # nodes inside the exclusion kept from folding tighter than the rod (no self-passage)
         "fold": _engine("Contact", "fold"),
         "skin": _engine("Contact", "skin"),
         "near_skin": _engine("Contact", "near_skin"),

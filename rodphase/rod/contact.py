@@ -512,7 +512,7 @@ def fold_forces(x, radius, rest_length, exclusion, stiffness, scale, reach, forc
 
     Per q one bound is used, the most permissive over the rod: the shortest rest arc of q
     elements and the smallest current radius (d_min grows with both), so the test is a
-    distance against a number, in a loop that vectorises. The spring k·(d_min − d) acts
+    squared distance against a number. The spring k·(d_min − d) acts
     along the line between the two nodes: it is the gradient of ½·k·(d_min − d)², d_min
     fixed, so it conserves momentum, angular momentum and (undamped) energy. It carries no
     dashpot. An earlier form between segments with d_min over the current arc fed itself (a

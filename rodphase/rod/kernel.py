@@ -100,7 +100,7 @@ Settings = namedtuple("Settings", [
     "drag_radius",  # m: lever that turns spin into a surface speed for the quadratic drag
     "contact",  # bool: self-contact on
     "exclusion",  # int: elements closer than this along the rod never touch
-    "fold",  # bool: pairs inside the exclusion kept from folding tighter than the rod (fold_forces)
+    "fold",  # bool: nodes inside the exclusion kept from folding tighter than the rod (fold_forces)
     "implicit_dashpot",  # bool: contact dashpots as backward-Euler impulses after the kick
     "friction",  # Coulomb coefficient
     "slip_speed",  # m/s, below it friction is viscous
@@ -175,8 +175,9 @@ N_HISTORY = len(HISTORY_COLUMNS)
 # this bring the matrix log near its branch cut at 180°, where twist would silently wrap
 COS_MAX_TURN = -0.7071
 # cos 45°: an element whose frame's d3 is this far off its tangent is sheared beyond what a
-# rod model describes (the paper's rods shear by well under a degree); the director then lies
-# near the centreline, whose twist about it wraps, and link is lost to a numerical runaway
+# rod model describes (Fig 3's tightest solenoids shear by 20-30° at n = 80 before a snap runs
+# away past 60°); d1 then lies near the centreline, the twist measured about it wraps, and
+# link is lost to a numerical runaway. More elements usually mend it (runner.REFINABLE_GUARDS)
 COS_MAX_SHEAR = 0.7071
 
 # status codes advance returns

@@ -204,9 +204,9 @@ class Contact:
     friction: float = setting(0.0, minimum=0.0, maximum=5.0)
     slip_speed: float = 1e-4  # m/s, below it friction is viscous (regularised Coulomb)
     exclusion: float = setting(math.pi, "rest radii of arc length", minimum=0.0, strict_min=True)
-    # pairs inside the exclusion held apart by the chord of a circle of the rod's radius over
-    # the arc between them (contact.fold_forces): a loop pulled tighter than the rod cannot
-    # close through itself, so link is not lost by a self-passage no real filament makes
+    # nodes inside the exclusion held apart by the chord of a circle of the rod's radius over
+    # the rest arc between them (contact.fold_forces): a loop pulled tighter than the rod
+    # cannot close through itself, so link is not lost by a self-passage no filament makes
     fold: bool = setting(True)
     # the Verlet-list margin
     skin: float = setting(0.5, "rest radii", minimum=0.0, strict_min=True)
