@@ -130,8 +130,12 @@ def test_rerun_skips_finished_runs_and_other_config_is_refused(tmp_path):
 
 def test_killed_sweep_resumes_and_keeps_finished_runs_identical(tmp_path):
     # A real kill: the sweep runs in its own process group, is SIGKILLed once two runs are in
-    # the file, and the same command then completes only the missing runs.
-    path = sweep_file(tmp_path, samples=6, extra={"solver.hold_max_time": 2.0})
+    # the file, and the same command then completes only the missing runs. Each run holds its
+    # whole 20 s (hold_until: time; about half a second of CPU): ended at equilibrium, the runs
+    # became fast enough that all six could land between two polls, and the test skipped
+    # instead of killing anything (CI, 2026-12-03).
+    path = sweep_file(tmp_path, samples=6,
+                      extra={"solver.hold_max_time": 20.0, "solver.hold_until": "time"})
     out = tmp_path / "out.h5"
     command = [sys.executable, "-m", "rodphase.cli", "sweep", str(path), "-o", str(out),
                "--jobs", "1", "--quiet"]
