@@ -636,7 +636,7 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
                    radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
                    radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force,
-                   dashpots, contact_work, fold_reach):
+                   dashpots, contact_work, fold_reach, fold_next):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
@@ -646,7 +646,7 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
     With settings.implicit_dashpot the dashpots are noted in `dashpots` (regrown with the
     lists) for apply_dashpots after the kick instead of entering `force`. With settings.fold
     the nodes inside the exclusion are kept from folding through each other (fold_forces,
-    work buffer fold_reach).
+    work buffers fold_reach and fold_next).
     Returns the lists and their counters, then (touching pairs, largest overlap / radius,
     its element, contact energy, the dashpot buffer, dashpots noted in it).
     """
@@ -729,7 +729,8 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             contact_work[:3], contact_work[3], contact_work[4])
     if settings.fold:
         fold_touching, fold_worst, fold_at, fold_energy = fold_forces(
-            x, radius, rod.rest_length, exclusion, contact_k, f_stiff, fold_reach, force)
+            x, radius, lengths, rod.rest_length, exclusion, contact_k, f_stiff, fold_reach,
+            fold_next, force)
         touching += fold_touching
         contact_energy += fold_energy
         if fold_worst > worst:
@@ -1182,6 +1183,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     # the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
     contact_work = np.empty((5, n))
     fold_reach = np.empty(settings.exclusion + 1)
+    fold_next = np.empty(n + 1, dtype=np.int64)
     # Stiff dissipative terms taken implicitly after the kick (see _axial_damping and
     # contact.apply_dashpots): the dashpots noted by the contact loop, and 1/m of the free
     # nodes as the kick scales it (0 at a node held in all three components: the impulse
@@ -1324,7 +1326,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
                 near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work,
-                fold_reach)
+                fold_reach, fold_next)
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
