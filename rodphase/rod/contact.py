@@ -577,12 +577,12 @@ def fold_forces(x, radius, lengths, rest_length, exclusion, stiffness, scale, re
             d_min = np.sqrt(limit)
             dist = np.sqrt(dist2)
             overlap = d_min - dist
-            spring = scale * stiffness[min(k, n - 1)] * overlap
+            spring = scale * stiffness[k] * overlap
             touching += 1
             energy += 0.5 * spring * overlap
             if overlap > worst * a:
                 worst = overlap / a
-                worst_element = min(k, n - 1)
+                worst_element = k
             f = spring / dist
             force[0, k] -= f * d0
             force[1, k] -= f * d1
