@@ -38,7 +38,7 @@ SCENES = {
 }
 
 
-def run_all(only=None) -> dict[str, np.ndarray]:
+def run_all(only=None, extra=()) -> dict[str, np.ndarray]:
     from rodphase import config as C
     from rodphase.runner import run_scene
     from rodphase.scenes import SCENES as BUILDERS
@@ -47,7 +47,7 @@ def run_all(only=None) -> dict[str, np.ndarray]:
     for name, overrides in SCENES.items():
         if only and name not in only:
             continue
-        cfg = C.load_scene(name, list(overrides.items()), BUILDERS)
+        cfg = C.load_scene(name, list(overrides.items()) + list(extra), BUILDERS)
         r = run_scene(cfg.plain(), topology=False)
         print(f"{name:18s} {r.status:14s} steps {r.diagnostics['steps']:7d}  "
               f"max contacts {int(r.history['contacts'].max()) if len(r.history['time']) else 0}",
@@ -87,10 +87,17 @@ def main(argv=None) -> int:
     parser.add_argument("paths", nargs="+")
     parser.add_argument("--compare", action="store_true", help="compare two saved .npz files")
     parser.add_argument("--only", nargs="+", choices=sorted(SCENES), help="run these scenes only")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="an override for every scene (e.g. a new key at the value that "
+                        "keeps the old behaviour)")
     args = parser.parse_args(argv)
     if args.compare:
         return 0 if compare(*args.paths) else 1
-    np.savez(args.paths[0], **run_all(args.only))
+    import yaml
+
+    extra = [(key, yaml.safe_load(value)) for key, value in
+             (item.split("=", 1) for item in args.set)]
+    np.savez(args.paths[0], **run_all(args.only, extra))
     return 0
 
 
