@@ -113,8 +113,15 @@ def run(scene, output, sets, force):
         table = classify_store(store)
     d = result.diagnostics
     click.echo(f"{result.status}: {result.message}")
-    click.echo(f"{d['steps']} steps of {d['dt']:.3g} s in {d['wall_time']:.1f} s "
-               f"({d['us_per_step']:.1f} µs/step); written to {output}")
+    if d.get("dt_asleep") is not None and d.get("contact_woke_at") is None:
+        steps = f"{d['steps']} steps of {d['dt_asleep']:.3g} s (contact never woke)"
+    elif d.get("dt_asleep") is not None:
+        steps = (f"{d['steps']} steps of {d['dt_asleep']:.3g} s, and of {d['dt']:.3g} s from "
+                 f"contact's first touch at t = {d['contact_woke_at']:.3g} s,")
+    else:
+        steps = f"{d['steps']} steps of {d['dt']:.3g} s"
+    click.echo(f"{steps} in {d['wall_time']:.1f} s ({d['us_per_step']:.1f} µs/step); "
+               f"written to {output}")
     row = table.iloc[0]
     parts = [f"phase {row['phase']}", f"alignment {row['alignment']:.2f}"]
     for key in ("link", "twist", "writhe"):

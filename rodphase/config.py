@@ -279,6 +279,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "exclusion": _engine("Contact", "exclusion"),
         # nodes inside the exclusion kept from folding tighter than the rod (no self-passage)
         "fold": _engine("Contact", "fold"),
+        # the step of a rod without contact until the rod first touches itself
+        "sleep": _engine("Contact", "sleep"),
         "skin": _engine("Contact", "skin"),
         "near_skin": _engine("Contact", "near_skin"),
         "penetration_limit": _engine("Contact", "penetration_limit"),
@@ -754,6 +756,9 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     # hash moved with it; a store written before it is not resumed by the new physics, and
     # contact.fold: false hashes (and runs) as before
     ("contact", "fold"): False,
+    # contact asleep until the rod first touches itself (issue #16, lever 3): on by default,
+    # so the hashes moved again; contact.sleep: false hashes (and runs) as before
+    ("contact", "sleep"): False,
 }
 
 

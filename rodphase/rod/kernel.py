@@ -101,6 +101,7 @@ Settings = namedtuple("Settings", [
     "contact",  # bool: self-contact on
     "exclusion",  # int: elements closer than this along the rod never touch
     "fold",  # bool: nodes inside the exclusion kept from folding tighter than the rod (fold_forces)
+    "sleep",  # bool, with contact off: contact computed but not applied; S_WAKE at a touch
     "implicit_dashpot",  # bool: contact dashpots as backward-Euler impulses after the kick
     "friction",  # Coulomb coefficient
     "slip_speed",  # m/s, below it friction is viscous
@@ -189,6 +190,9 @@ S_PENETRATION = 4
 S_RESOLUTION = 5  # neighbouring frames turned by more than 135°: the rod is under-resolved
 S_CLAMP_LAG = 6  # an end frame lags its turning clamp by more than 135°: twisted too fast
 S_SHEAR = 7  # an element sheared by more than 45°: a runaway, not a rod
+# not a guard: sleeping contact (settings.sleep) found the rod touching itself or an end body;
+# the state is at the returned time, and the caller goes on with contact on (and its step)
+S_WAKE = 8
 
 # The guards, one row each (as diffrax's RESULTS): the short name for diagnostics["guard"]
 # (what a caller may act on), what tripped, where info[D_WHERE] points, and what to change.
@@ -1089,6 +1093,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     the stability probe (settings.probe): a candidate equilibrium of a hold is displaced by
     settings.probe_size along it, and the hold ends only once that displacement has decayed.
     Returns (status, steps_taken, t_end, rows_written); out.info (N_INFO,) gets diagnostics.
+    With contact asleep (settings.sleep, settings.contact off) the status S_WAKE says the rod
+    touched itself (or an end body) at t_end: the caller goes on from there with contact on.
 
     A step composes the pieces above: controls at the half step -> loads (internal_loads,
     the clamp couples, contact, external loads) -> kick -> guards -> record -> drift -> the
@@ -1119,6 +1125,11 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     dt = settings.dt
     incompressible = settings.incompressible
     contact_on = settings.contact
+    # Sleeping contact (settings.sleep): contact is computed as awake, but at the first
+    # touch (a pair, a fold or an end body) the loop returns S_WAKE before the forces act,
+    # with the state at that step's start, and the caller goes on with contact on and its
+    # time step. Before that the step is the larger one of a rod without contact.
+    asleep = (not contact_on) and settings.sleep
     history_every = max(settings.history_every, 1)
     check_every = max(settings.check_every, 1)
     stop_at_equilibrium = settings.stop_at_equilibrium
@@ -1319,7 +1330,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 info[D_VALUE] = np.arccos(max(couple[7], -1.0))
                 break
 
-        if contact_on:
+        if contact_on or asleep:
             (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
              near_margin, near_age, touching, worst, worst_at, contact_energy, dashpots,
              noted) = _contact_loads(
@@ -1327,6 +1338,12 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
                 near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work,
                 fold_reach, fold_next)
+            if asleep and touching > 0:
+                # hand back the state at t (positions are half a step ahead here); the
+                # overlap is at most one asleep step's closing, as at any first touch
+                status = S_WAKE
+                _drift(x, v, Q, w, -0.5 * dt)
+                break
             if worst > max_penetration:
                 max_penetration = worst
             if worst > penetration_limit:
@@ -1438,7 +1455,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 rows += 1
             break
 
-    if status == S_COMPLETED or status == S_EQUILIBRIUM:
+    if status == S_COMPLETED or status == S_EQUILIBRIUM or status == S_WAKE:
         disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t)
         _apply_held(x, v, ends, disp, 0.0)
     info[D_MAX_PENETRATION] = max_penetration

@@ -208,6 +208,10 @@ class Contact:
     # the rest arc between them (contact.fold_forces): a loop pulled tighter than the rod
     # cannot close through itself, so link is not lost by a self-passage no filament makes
     fold: bool = setting(True)
+    # Contact sleeps until the rod first touches itself (a pair, a fold) or an end body: until
+    # then the run takes the larger time step of a rod without contact, and from the step of
+    # that touch on it is awake, with its own step, for the rest of the run (simulate.py)
+    sleep: bool = setting(True)
     # the Verlet-list margin
     skin: float = setting(0.5, "rest radii", minimum=0.0, strict_min=True)
     # the smallest margin of the short list the force loop runs over; the kernel doubles it

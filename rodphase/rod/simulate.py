@@ -6,6 +6,7 @@ This is the only place that converts between the public (N, 3) arrays and the ke
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -40,12 +41,15 @@ def _all_controls(problem: Problem) -> list[Controls]:
     return [problem.controls] + [s.controls for s in problem.stages if s.controls is not None]
 
 
-def time_step(problem: Problem) -> tuple[float, float]:
-    """(dt, stable bound) for the problem: the user's dt or safety × the bound over all stages."""
+def time_step(problem: Problem, *, asleep: bool = False) -> tuple[float, float]:
+    """(dt, stable bound) for the problem: the user's dt or safety × the bound over all stages;
+    with `asleep`, for the part of the run before contact wakes (the bound of a rod without
+    contact, see Contact.sleep)."""
     controls = _all_controls(problem)
     stiff = max(_table_extreme(c.stiffness, max) for c in controls)
     grow = min(_table_extreme(c.radius, min) for c in controls)
-    bound = stable_time_step(problem.rod, problem.contact, stiff, grow)
+    contact = dataclasses.replace(problem.contact, enabled=False) if asleep else problem.contact
+    bound = stable_time_step(problem.rod, contact, stiff, grow)
     dt = problem.solver.dt if problem.solver.dt is not None else problem.solver.safety * bound
     return dt, bound
 
@@ -91,8 +95,10 @@ def _rod_arrays(problem: Problem):
 
 def _kernel_inputs(problem: Problem, ends: Ends, dt: float, history_every: int,
                    until_equilibrium: bool, equilibrium_after: float, controls: Controls,
-                   start_position, end_position, start_frame, end_frame):
-    """The kernel's Boundary and Settings for one stage, field by field (see rod/kernel.py)."""
+                   start_position, end_position, start_frame, end_frame, asleep: bool):
+    """The kernel's Boundary and Settings for one stage, field by field (see rod/kernel.py);
+    `asleep`: contact computed but not applied, the run stopping at its first touch
+    (settings.sleep)."""
     rod, contact, solver = problem.rod, problem.contact, problem.solver
     axis = np.asarray(ends.axis, float)
     fdir = np.asarray(controls.force_direction, float)
@@ -126,9 +132,10 @@ def _kernel_inputs(problem: Problem, ends: Ends, dt: float, history_every: int,
         quadratic_drag=float(solver.quadratic_drag),
         strain_rate_damping=float(solver.strain_rate_damping),
         drag_radius=float(rod.radius),
-        contact=bool(contact.enabled),
+        contact=bool(contact.enabled and not asleep),
         implicit_dashpot=contact.dashpot == "implicit",
         fold=bool(contact.fold),
+        sleep=bool(asleep),
         exclusion=int(max(1, math.ceil(contact.exclusion * rod.radius * grown / rod.element_length))),
         friction=float(contact.friction),
         slip_speed=float(contact.slip_speed),
@@ -330,6 +337,12 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
             f"{rows:.3g} snapshots ({snapshot_bytes / 1e9:.3g} GB) for this protocol; allowed: "
             f"at most {SNAPSHOT_LIMIT / 1e9:g} GB, i.e. history_interval >= "
             f"{problem.solver.history_interval * snapshot_bytes / SNAPSHOT_LIMIT:.3g} s"))
+    # Sleeping contact (Contact.sleep): until the rod first touches itself the run takes the
+    # step of a rod without contact (1.6x longer for the paper's rod at 80 elements); from
+    # the step of that touch on, the step with contact. A user's dt is both.
+    asleep = problem.contact.enabled and problem.contact.sleep
+    dt_asleep, bound_asleep = time_step(problem, asleep=True) if asleep else (dt, bound)
+    woke_at = None
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
     initial_end = state.x[:, n].copy()
@@ -361,11 +374,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
         if own or index == 0:
             start_position = state.x[:, 0].copy()
             end_position = state.x[:, n].copy()
-        boundary, settings = _kernel_inputs(problem, ends, dt, history_every,
-                                            stage.until_equilibrium, settled, controls,
-                                            start_position, end_position, start_frame, end_frame)
         table_t, table_v, table_n = _table_arrays(tables, shift)
-        n_steps = int(math.ceil(stage.duration / dt - 1e-9))
+        n_steps = int(math.ceil(stage.duration / (dt_asleep if asleep else dt) - 1e-9))
         if n_steps <= 0:
             # a stage of zero length (e.g. no load ramp) has nothing to do; it keeps its place
             # in the report so that stage indices and labels stay aligned
@@ -379,37 +389,63 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
         n_steps = min(n_steps, budget - steps_total)
         if n_steps <= 0:
             break
-        capacity = n_steps // history_every + 2
-        hist = np.zeros((capacity, k.N_HISTORY))
-        snap_x = np.zeros((capacity, 3, n + 1))
-        snap_d = np.zeros((capacity, 3, n))
+        stage_end = t0 + stage.duration
+        stage_steps = 0
+        first_call = True
         rod_properties = k.RodProperties(local_mask=_local_mask(n, controls.segment), **arrays)
-        arguments = (state.x, state.v, state.Q, state.w, float(t0), int(n_steps), rod_properties,
-                     boundary, settings, k.ControlTables(table_t, table_v, table_n),
-                     probe_shape(n, ends.axis, problem.solver.probe_seed + index),
-                     k.Output(hist, snap_x, snap_d, info))
-        # the law is a specialization of advance (see its docstring): the paper's is called
-        # exactly as before the option existed
-        if rod.law == "paper":
-            code, steps, t_end, rows = k.advance(*arguments)
-        else:
-            code, steps, t_end, rows = k.advance(*arguments, True)
-        state.time = t_end
-        steps_total += steps
-        rebuilds += int(info[k.D_REBUILDS])
-        near_rebuilds += int(info[k.D_NEAR_REBUILDS])
-        max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
-        max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
-        hist[:rows, k.H_END_DISPLACEMENT] += ((end_position - initial_end) @ boundary.axis
-                                              + problem.end_displacement_offset)
-        rows_h.append(hist[:rows])
-        rows_x.append(snap_x[:rows])
-        rows_d.append(snap_d[:rows])
-        stage_ids.append(np.full(rows, index))
+        while True:
+            # one kernel call, or two if sleeping contact wakes within the stage: the second
+            # goes on from the same time with contact on and its own time step
+            step_dt, step_bound = (dt_asleep, bound_asleep) if asleep else (dt, bound)
+            history_every = max(1, int(round(problem.solver.history_interval / step_dt)))
+            boundary, settings = _kernel_inputs(problem, ends, step_dt, history_every,
+                                                stage.until_equilibrium, settled, controls,
+                                                start_position, end_position, start_frame,
+                                                end_frame, asleep)
+            if not first_call:
+                n_steps = int(math.ceil((stage_end - state.time) / step_dt - 1e-9))
+                n_steps = min(n_steps, budget - steps_total)
+                if n_steps <= 0:  # woke at the stage's very end
+                    code = k.S_COMPLETED
+                    break
+            capacity = n_steps // history_every + 2
+            hist = np.zeros((capacity, k.N_HISTORY))
+            snap_x = np.zeros((capacity, 3, n + 1))
+            snap_d = np.zeros((capacity, 3, n))
+            info = np.zeros(k.N_INFO)
+            arguments = (state.x, state.v, state.Q, state.w, float(state.time), int(n_steps),
+                         rod_properties, boundary, settings,
+                         k.ControlTables(table_t, table_v, table_n),
+                         probe_shape(n, ends.axis, problem.solver.probe_seed + index),
+                         k.Output(hist, snap_x, snap_d, info))
+            # the law is a specialization of advance (see its docstring): the paper's is called
+            # exactly as before the option existed
+            if rod.law == "paper":
+                code, steps, t_end, rows = k.advance(*arguments)
+            else:
+                code, steps, t_end, rows = k.advance(*arguments, True)
+            state.time = t_end
+            steps_total += steps
+            stage_steps += steps
+            rebuilds += int(info[k.D_REBUILDS])
+            near_rebuilds += int(info[k.D_NEAR_REBUILDS])
+            max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
+            max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
+            hist[:rows, k.H_END_DISPLACEMENT] += ((end_position - initial_end) @ boundary.axis
+                                                  + problem.end_displacement_offset)
+            rows_h.append(hist[:rows])
+            rows_x.append(snap_x[:rows])
+            rows_d.append(snap_d[:rows])
+            stage_ids.append(np.full(rows, index))
+            if code != k.S_WAKE:
+                break
+            asleep = False
+            woke_at = t_end
+            first_call = False
         stage_ends.append(sum(len(r) for r in rows_h) - 1)
         stage_states.append((state.positions, state.directors))
         label = stage.label or f"stage {index}"
-        stage_report.append(_stage_entry(stage, label, steps, t_end, code, info))
+        stage_report.append(_stage_entry(stage, label, stage_steps, state.time, code, info))
         if code in k.GUARDS:
             status = "unstable"
             guard, guard_words, unit, advice = k.GUARDS[code]
@@ -421,9 +457,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
                 advice = (f"solver.dt = {dt:.3g} s is {dt / bound:.3g} times the stable bound "
                           f"{bound:.3g} s for {n} elements: use solver.dt: auto or a dt below "
                           "the bound.")
-            message = (f"unstable in {label} at t = {t_end:.4g} s: {guard_words} at {unit} "
-                       f"{where} (value {info[k.D_VALUE]:.3g}); dt = {dt:.3g} s, stable bound "
-                       f"{bound:.3g} s. {advice}")
+            message = (f"unstable in {label} at t = {state.time:.4g} s: {guard_words} at {unit} "
+                       f"{where} (value {info[k.D_VALUE]:.3g}); dt = {step_dt:.3g} s, stable "
+                       f"bound {step_bound:.3g} s. {advice}")
             break
         if stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
             status = "not_converged"
@@ -449,6 +485,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
     radii = current_radii(rod.radius, rod.incompressible, rest, lengths, radius_factor)
     diagnostics = {
         "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
+        # sleeping contact: the step before it woke, and when it woke (None: it never did)
+        "dt_asleep": dt_asleep if problem.contact.enabled and problem.contact.sleep else None,
+        "contact_woke_at": woke_at,
         "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
         "near_rebuilds": near_rebuilds, "max_pairs": max_pairs, "max_penetration": max_pen,
         "final_time": state.time,
