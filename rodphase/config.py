@@ -300,6 +300,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "max_steps": (number(1, integer=True, nullable=True), None),
         # a run stopped as under-resolved is run again with twice the elements, up to this
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
+        # a refined run goes on from a second before the trip ("trip") or starts over
+        "refine_from": (choice("trip", "start"), "trip"),
         # a hold ends only at an equilibrium that survives a perturbation of this size
         "stability_probe": _engine("Solver", "stability_probe"),
         "probe_size": _engine("Solver", "probe_size"),
@@ -759,6 +761,9 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     # contact asleep until the rod first touches itself (issue #16, lever 3): on by default,
     # so the hashes moved again; contact.sleep: false hashes (and runs) as before
     ("contact", "sleep"): False,
+    # a refined run going on from a second before its trip (issue #16): on by default, so the
+    # hashes moved again; solver.refine_from: start hashes (and runs) as before
+    ("solver", "refine_from"): "start",
 }
 
 

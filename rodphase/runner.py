@@ -6,6 +6,7 @@ the same result for the same config; the engine (rodphase.rod) knows nothing of 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -66,10 +67,15 @@ def with_topology(result: RunResult, problem: Problem) -> RunResult:
     not account for (guard `link`)."""
     if not len(result.snapshot_positions):
         return result
+    topology_columns(result, problem)
+    return account_link(result, problem)
+
+
+def topology_columns(result: RunResult, problem: Problem) -> None:
+    """Lk, Tw and Wr (turns) of every snapshot into the history (one snapshot per row)."""
     from .topology import topology_history
 
-    history, notes = result.history, result.diagnostics.setdefault("notes", [])
-    status, message = result.status, result.message
+    history = result.history
     positions, d1 = result.snapshot_positions, result.snapshot_d1
     lk, tw, wr = topology_history(positions, d1)
     # The clamps sit half an element beyond the end frames; the twist over those halves
@@ -77,6 +83,12 @@ def with_topology(result: RunResult, problem: Problem) -> RunResult:
     start_frame, end_frame = clamp_reference(problem)
     extra = clamp_twist(problem, start_frame, end_frame, history, positions, d1)
     history["link"], history["twist"], history["writhe"] = lk + extra, tw + extra, wr
+
+
+def account_link(result: RunResult, problem: Problem) -> RunResult:
+    """The link bookkeeping of with_topology, on a history that has its link column."""
+    history, notes = result.history, result.diagnostics.setdefault("notes", [])
+    status, message = result.status, result.message
     if problem.ends.start_frame_held and problem.ends.end_frame_held:
         escapes = link_escapes(history)
         history["link_escapes"] = np.cumsum(np.abs(escapes) > 0).astype(float)
@@ -139,6 +151,93 @@ def run(problem: Problem, *, max_steps: int | None = None, topology: bool = Fals
 
 # the guards whose runs more elements can mend (solver.refine_up_to)
 REFINABLE_GUARDS = ("resolution", "shear")
+# With solver.refine_from "trip", a run stopped by one of them goes on at twice the elements
+# from its snapshot this long before the trip, not from the start: the runaway that trips the
+# 45° shear guard builds over about half a second (Fig 3's top edge: 19° 0.4 s after the snap
+# began, 45° later), and a second before it the rod is still resolved.
+REFINE_BACK = 1.0  # s
+
+
+def _anchors(origin: Problem, first: RunResult, stage: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes 0 and n where stage `stage` holds them from: at the start of the last stage up to
+    it that has its own clock (or of the run), as simulate takes them."""
+    own = [j for j in range(stage + 1) if j == 0 or origin.stages[j].controls is not None][-1]
+    positions = origin.state.positions if own == 0 else first.stage_states[own - 1][0]
+    return positions[0].copy(), positions[-1].copy()
+
+
+def _steps_until(first: RunResult, stage: int, stage_start: float, at: float) -> int:
+    """Steps `first` took up to time `at` in stage `stage`: its reports for the stages before,
+    and the time into the stage over its step(s) (the larger one before contact woke)."""
+    d = first.diagnostics
+    before = sum(entry["steps"] for entry in d["stages"][:stage])
+    dt, asleep = d["dt"], d.get("dt_asleep")
+    woke = d.get("contact_woke_at")
+    if asleep is None or (woke is not None and woke <= stage_start):
+        return before + round((at - stage_start) / dt)
+    awake_from = at if woke is None else min(max(woke, stage_start), at)
+    return before + round((awake_from - stage_start) / asleep + (at - awake_from) / dt)
+
+
+def refined_from_trip(first: RunResult, origin: Problem, problem: Problem, topology: bool,
+                      max_steps: int | None = None) -> RunResult | None:
+    """The run `first` (stopped by a refinable guard) gone on with `problem`, the same scene
+    with twice first's elements, from first's last snapshot at least REFINE_BACK before the
+    trip, resampled (rodphase.resample.doubled). `origin` is the scene's problem as first
+    started it (its initial state and stages). The history is first's up to that row, then
+    the new run's; the shapes and the final state are the new run's (stage_states keep
+    first's before the resumed stage, at first's elements). None if there is no such
+    snapshot (the trip came too early to save anything)."""
+    from .resample import doubled
+    from .rod.model import state_from
+    from .rod.simulate import Resume, simulate
+
+    times = first.history["time"]
+    rows = first.snapshot_history_rows
+    tripped = float(first.diagnostics["final_time"])
+    before = np.flatnonzero(times[rows] <= tripped - REFINE_BACK)
+    if not len(before):
+        return None
+    snapshot = int(before[-1])
+    row = int(rows[snapshot])
+    at = float(times[row])
+    stage = int(first.history["stage"][row])
+    stage_start = (origin.state.time if stage == 0
+                   else float(first.diagnostics["stages"][stage - 1]["end_time"]))
+    start_position, end_position = _anchors(origin, first, stage)
+    positions, directors = doubled(first.snapshot_positions[snapshot],
+                                   first.snapshot_d1[snapshot])
+    woke = first.diagnostics.get("contact_woke_at")
+    resume = Resume(stage=stage, stage_start=stage_start, start_position=start_position,
+                    end_position=end_position, initial_end=origin.state.positions[-1],
+                    contact_awake=woke is not None and woke <= at)
+    # the clamps hold what they held at zero rotation in the run from the start
+    problem.clamp_reference = clamp_reference(problem)
+    problem.state = state_from(positions, directors, time=at)
+    second = simulate(problem, max_steps=max_steps, resume=resume)
+    if topology and len(second.snapshot_positions):
+        topology_columns(second, problem)
+    history = {name: np.concatenate([first.history[name][:row + 1], second.history[name]])
+               for name in second.history if name in first.history}
+    diagnostics = dict(second.diagnostics)
+    diagnostics["stages"] = first.diagnostics["stages"][:stage] + second.diagnostics["stages"]
+    # the steps of the run as kept (first's up to the resume point), as for a run refined
+    # from the start; what first did after it is in wall_time_before_refining
+    diagnostics["steps"] = (_steps_until(first, stage, stage_start, at)
+                            + second.diagnostics["steps"])
+    diagnostics["refined_at"] = at
+    diagnostics["notes"] = list(second.diagnostics.get("notes", [])) + [
+        f"went on at {problem.rod.elements} elements from the state at t = {at:.4g} s "
+        f"({REFINE_BACK:g} s or more before the trip at {tripped:.4g} s), resampled; the "
+        "shapes before it are not kept"]
+    merged = dataclasses.replace(
+        second, history=history, diagnostics=diagnostics,
+        snapshot_rows=second.snapshot_history_rows + row + 1,
+        stage_ends=first.stage_ends[:stage] + [e + row + 1 for e in second.stage_ends],
+        stage_states=first.stage_states[:stage] + second.stage_states)
+    if topology and "link" in history:
+        merged = account_link(merged, problem)
+    return merged
 
 
 def run_scene(scene, *, topology: bool | None = None,
@@ -146,8 +245,9 @@ def run_scene(scene, *, topology: bool | None = None,
     """Build and simulate one scene: a validated config (used as it is) or a plain mapping
     (validated first). Never raises for a failed run: a run that goes unstable comes back
     with that status. A run stopped by the 135° resolution guard or the 45° shear guard is run
-    again with twice the elements, up to solver.refine_up_to; `twist_targets` (turns) makes
-    it a continuation."""
+    again with twice the elements, up to solver.refine_up_to (from a second before the trip
+    with solver.refine_from "trip", see refined_from_trip); `twist_targets` (turns) makes it
+    a continuation."""
     from .scenes import SCENES, build
 
     cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
@@ -166,22 +266,30 @@ def run_scene(scene, *, topology: bool | None = None,
             from .restart import continue_from
 
             problem = continue_from(problem, stored)
-        return run(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
+        return problem, run(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
 
     tried = [cfg.rod.elements]
-    result = once(cfg)
+    refine_from = cfg.solver.refine_from
+    origin, result = once(cfg)
     wall_before = 0.0
     # A rod turned by > 135° between neighbouring frames needs more elements, not a smaller
     # step, and so does one sheared by > 45° (a snap into a loop as tight as the rod, at
     # Fig 3's top edge: at n = 80 15 of 200 points, at n = 140 1 of 40): with
-    # solver.refine_up_to, run it again with twice as many (up to that number). A run
-    # started from a stored state has the stored rod's elements and cannot refine.
+    # solver.refine_up_to, run it again with twice as many (up to that number): with
+    # solver.refine_from "trip" from a second before the trip (refined_from_trip), else, or
+    # if the trip came sooner, from the start. A run started from a stored state has the
+    # stored rod's elements and cannot refine; a continuation refines from the start.
     while (result.diagnostics.get("guard") in REFINABLE_GUARDS and stored is None
            and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
         wall_before += result.diagnostics["wall_time"]
-        tried.append(min(2 * tried[-1], cfg.solver.refine_up_to))
-        cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", tried[-1])]), SCENES)
-        result = once(cfg)
+        elements = min(2 * tried[-1], cfg.solver.refine_up_to)
+        cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", elements)]), SCENES)
+        resumed = None
+        if refine_from == "trip" and elements == 2 * tried[-1] and not extra:
+            resumed = refined_from_trip(result, origin, build(cfg), want_topology,
+                                        cfg.solver.max_steps)
+        result = resumed if resumed is not None else once(cfg)[1]
+        tried.append(elements)
     if len(tried) > 1:
         result.diagnostics["refined_from"] = tried[:-1]
         result.diagnostics["wall_time_before_refining"] = wall_before

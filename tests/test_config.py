@@ -436,30 +436,32 @@ def test_every_command_has_an_example_in_its_help():
 # below), and as of the commit that let contact sleep until the rod nears itself
 # (contact.sleep, on by default: a larger time step before the first touch, so every contact
 # run's numbers move at the level of the time-step error; `contact.sleep: false` gives the
-# hashes before it, checked below). A store is resumed only by a config
+# hashes before it, checked below), and as of the commit that let a refined run go on from a
+# second before its trip (solver.refine_from: trip; `start` gives the hashes before it). A
+# store is resumed only by a config
 # of the same hash, so a new key whose default keeps the old behaviour must register in
 # C.HASH_NEUTRAL and leave these unchanged; a change here means every user's store written
 # before it can no longer be resumed.
 SHIPPED_HASHES = {
-    "fig3_adaptive.yaml": "e8bba6a8c29a783f",
-    "fig3_continuation.yaml": "2300a7f0cc49c8f9",
-    "fig3_grid.yaml": "e24f9cda13df8a90",
-    "fig3_paper.yaml": "e0858e671b59a078",
-    "fig3_paper_adaptive.yaml": "40d70b1cb6f12345",
-    "fig3_paper_reference.yaml": "d8ec6003e0fd7844",
-    "fig3_stretched.yaml": "c17ecabdea3bc9f6",
-    "hat_forces.yaml": "7f9ddfd7823dfefc",
-    "quick.yaml": "4b43f588e9d18a49",
-    "scenes/active_agent.yaml": "b0b7bf020a5e1f4f",
-    "scenes/fig2a_plectoneme.yaml": "06171342a9e0f372",
-    "scenes/fig2b_solenoid.yaml": "6e8fef575a3ff756",
-    "scenes/figS3_escape.yaml": "90a8b05a88455f18",
-    "scenes/hat_curve.yaml": "dbb5221beff71a14",
-    "scenes/helical_buckling.yaml": "e7cc996dfe027646",
-    "scenes/muscle.yaml": "4a635a81c3ef7af7",
-    "scenes/solenoid_loss.yaml": "3d0c1efb9ec15425",
-    "scenes/stiffening.yaml": "0aeb679902f9b928",
-    "scenes/twist_under_load.yaml": "0dc604dca39b6448",
+    "fig3_adaptive.yaml": "e1203f4a05bd6225",
+    "fig3_continuation.yaml": "84c85ca9b078a195",
+    "fig3_grid.yaml": "b85caaaf96a2424e",
+    "fig3_paper.yaml": "c31a8579b212ccfc",
+    "fig3_paper_adaptive.yaml": "589cf0da07ec5786",
+    "fig3_paper_reference.yaml": "a603d1d53de4101c",
+    "fig3_stretched.yaml": "79f90b85fae2e95e",
+    "hat_forces.yaml": "e80d8ddd078757a9",
+    "quick.yaml": "993506a6f29e7e75",
+    "scenes/active_agent.yaml": "960a406d20b6870b",
+    "scenes/fig2a_plectoneme.yaml": "767b034b93fb8a9e",
+    "scenes/fig2b_solenoid.yaml": "eb30ae4ee82cfee5",
+    "scenes/figS3_escape.yaml": "fddd9828d6ff37da",
+    "scenes/hat_curve.yaml": "76ed76ed5be12bf2",
+    "scenes/helical_buckling.yaml": "daaf407a7aa38735",
+    "scenes/muscle.yaml": "cee164392ae36944",
+    "scenes/solenoid_loss.yaml": "20a2073b65584fe6",
+    "scenes/stiffening.yaml": "e231548394f45689",
+    "scenes/twist_under_load.yaml": "8d0af598de879a32",
 }
 
 
@@ -481,16 +483,18 @@ def test_fold_contact_off_gives_the_hashes_from_before_it():
               "scenes/twist_under_load.yaml": "0d98e59a15617bd0"}
     for name, expected in before.items():
         cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("contact.fold", False),
-                                                      ("contact.sleep", False)], SCENES)
+                                                      ("contact.sleep", False),
+                                                      ("solver.refine_from", "start")], SCENES)
         assert C.config_hash(cfg) == expected, name
 
 
-def test_contact_awake_from_the_start_gives_the_hashes_from_before_sleeping_contact():
-    # the pins of the commit before contact.sleep
+def test_this_sessions_keys_at_their_old_behaviour_give_the_hashes_from_before_them():
+    # the pins of the commit before contact.sleep and solver.refine_from
     before = {"scenes/fig2b_solenoid.yaml": "47352e348fae4462",
               "scenes/twist_under_load.yaml": "91ca00c16beb833f"}
     for name, expected in before.items():
-        cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("contact.sleep", False)], SCENES)
+        cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("contact.sleep", False),
+                                                      ("solver.refine_from", "start")], SCENES)
         assert C.config_hash(cfg) == expected, name
 
 

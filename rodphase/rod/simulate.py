@@ -300,8 +300,29 @@ def _refused(problem: Problem, dt: float, bound: float, message: str) -> RunResu
                                   "youngs_modulus": problem.rod.youngs_modulus, "stages": []})
 
 
-def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
+@dataclasses.dataclass(frozen=True)
+class Resume:
+    """Where a run goes on from inside its protocol (the runner's refinement of a run that went
+    under-resolved): problem.state, at its own time, lies in stage `stage`, which started at
+    `stage_start` (run clock) with its held anchors at `start_position` and `end_position`
+    (nodes 0 and n, (3,)); `initial_end` is node n at the run's start (the end displacement
+    is counted from it), and `contact_awake` says contact had woken already."""
+
+    stage: int
+    stage_start: float
+    start_position: np.ndarray
+    end_position: np.ndarray
+    initial_end: np.ndarray
+    contact_awake: bool
+
+
+def simulate(problem: Problem, *, max_steps: int | None = None,
+             resume: Resume | None = None) -> RunResult:
     """Advance `problem.state` through `problem.stages` and return a RunResult.
+
+    With `resume`, the run goes on from inside stage resume.stage (see Resume): the stages
+    before it are not run, and the result holds the history, stage reports and stage states
+    from there on only.
 
     A stage with `until_equilibrium` ends early once the largest free nodal force (and
     torque per element length) is below solver.hold_tolerance × force scale and the kinetic
@@ -340,12 +361,13 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
     # Sleeping contact (Contact.sleep): until the rod first touches itself the run takes the
     # step of a rod without contact (1.6x longer for the paper's rod at 80 elements); from
     # the step of that touch on, the step with contact. A user's dt is both.
-    asleep = problem.contact.enabled and problem.contact.sleep
+    asleep = problem.contact.enabled and problem.contact.sleep and not (
+        resume is not None and resume.contact_awake)
     dt_asleep, bound_asleep = time_step(problem, asleep=True) if asleep else (dt, bound)
     woke_at = None
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
-    initial_end = state.x[:, n].copy()
+    initial_end = state.x[:, n].copy() if resume is None else np.asarray(resume.initial_end, float)
     start_frame, end_frame = clamp_reference(problem)
 
     rows_h, rows_x, rows_d, stage_ids, stage_ends, stage_states = [], [], [], [], [], []
@@ -361,21 +383,28 @@ def simulate(problem: Problem, *, max_steps: int | None = None) -> RunResult:
     wall0 = time.perf_counter()
     budget = max_steps if max_steps is not None else np.iinfo(np.int64).max
     for index, stage in enumerate(problem.stages):
+        if resume is not None and index < resume.stage:
+            continue
+        resuming = resume is not None and index == resume.stage
         # A stage's own controls run on the stage clock; the problem's on the run clock.
         own = stage.controls is not None
         controls = stage.controls if own else problem.controls
-        t0 = state.time
+        t0 = resume.stage_start if resuming else state.time
         shift = t0 if own else 0.0
         tables = controls.tables()
         settled = shift + max(max(tb[0]) for tb in tables)
         ends = stage.ends if stage.ends is not None else problem.ends
         # Held components stay where the stage finds them, plus the displacement control,
         # when the stage has its own clock; on the run clock they are held from the start.
-        if own or index == 0:
+        if resuming:
+            start_position = np.array(resume.start_position, dtype=float)
+            end_position = np.array(resume.end_position, dtype=float)
+        elif own or index == 0:
             start_position = state.x[:, 0].copy()
             end_position = state.x[:, n].copy()
         table_t, table_v, table_n = _table_arrays(tables, shift)
-        n_steps = int(math.ceil(stage.duration / (dt_asleep if asleep else dt) - 1e-9))
+        left = t0 + stage.duration - state.time if resuming else stage.duration
+        n_steps = int(math.ceil(left / (dt_asleep if asleep else dt) - 1e-9))
         if n_steps <= 0:
             # a stage of zero length (e.g. no load ramp) has nothing to do; it keeps its place
             # in the report so that stage indices and labels stay aligned
