@@ -238,8 +238,15 @@ def test_an_unloaded_rod_twisted_past_its_onset_does_not_end_straight():
     # The case: no load, rest Phi*a = 0.21, above the clamped onset (0.17). Without
     # the stability probe the hold ends at once on the straight (unstable) equilibrium; with
     # it the rod buckles into a loop (measured Wr 0.94, as a 40 s hold by time gives).
-    cfg, r = run("twist_under_load", **{"rod.elements": 80, "loading.force_multiple": None,
-                                        "loading.extension": 1.0, "loading.twist_density": 0.21})
+    case = {"rod.elements": 80, "loading.force_multiple": None, "loading.extension": 1.0,
+            "loading.twist_density": 0.21}
+    cfg, r = run("twist_under_load", **case)
+    assert r.history["writhe"][-1] > 0.5
+    # With contact asleep until the first touch the step before it is 1.6x larger, and the
+    # imperfection grows out of the straight state before the hold's first test finds it at
+    # rest (measured: no probe, Wr 0.936 as with the probe). With contact awake from the start
+    # the hold finds the straight state at rest, and the probe is what sends it on its way.
+    cfg, r = run("twist_under_load", **case, **{"contact.sleep": False})
     assert r.history["writhe"][-1] > 0.5
     assert sum(s["probes_left"] for s in r.diagnostics["stages"]) >= 1
 
