@@ -89,3 +89,34 @@ def test_a_loop_slipping_over_an_end_is_counted_as_an_escape_of_two_turns():
     assert len(jumps) == count
     assert np.all(np.abs(np.abs(jumps) - 2.0) < 0.05), jumps
     assert h["link"][-1] - turns[-1] == pytest.approx(jumps.sum(), abs=0.05)
+
+
+def test_a_loop_passing_an_end_between_two_rows_is_one_escape():
+    # The closure is crossed in two halves when the strand passes the end between two rows'
+    # snapshots (Fig S3: −1.001 and −0.998 turns 0.05 s apart): one escape of −2, booked at
+    # the second row; separate jumps stay separate, and a clean row between them splits them.
+    from rodphase.runner import link_escapes
+
+    turns = np.linspace(0.0, 8.0, 9)
+    lost = np.array([0, 0, -1.001, -2.0, -2.0, -4.0, -4.0, -5.0, -6.0])
+    jumps = link_escapes({"link": turns + lost, "end_rotation": 2 * np.pi * turns})
+    assert np.flatnonzero(jumps).tolist() == [3, 5, 8]
+    assert jumps[[3, 5, 8]] == pytest.approx([-2.0, -2.0, -2.0], abs=1e-9)
+
+
+def test_an_escape_over_two_rows_is_accounted_row_by_row():
+    # the link check follows the escape row by row: a run whose link left in two halves is ok
+    from rodphase.result import RunResult
+    from rodphase.rod import Ends, Problem, Rod, straight_state
+    from rodphase.runner import account_link
+
+    turns = np.linspace(0.0, 8.0, 9)
+    lost = np.array([0, 0, -1.001, -2.0, -2.0, -2.0, -2.0, -2.0, -2.0])
+    history = {"time": np.arange(9.0), "link": turns + lost, "end_rotation": 2 * np.pi * turns}
+    result = RunResult("ok", "completed", None, None, None, None, history, np.zeros(0),
+                       np.zeros(0), {})
+    rod = Rod(length=1.0, radius=0.025, elements=4)
+    problem = Problem(rod=rod, state=straight_state(rod), ends=Ends(end_frame_held=True))
+    checked = account_link(result, problem)
+    assert checked.status == "ok", checked.message
+    assert checked.history["link_escapes"][-1] == 1
