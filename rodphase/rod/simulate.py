@@ -361,9 +361,9 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
     # Sleeping contact (Contact.sleep): until the rod first touches itself the run takes the
     # step of a rod without contact (1.6x longer for the paper's rod at 80 elements); from
     # the step of that touch on, the step with contact. A user's dt is both.
-    asleep = problem.contact.enabled and problem.contact.sleep and not (
-        resume is not None and resume.contact_awake)
-    dt_asleep, bound_asleep = time_step(problem, asleep=True) if asleep else (dt, bound)
+    sleeps = problem.contact.enabled and problem.contact.sleep
+    asleep = sleeps and not (resume is not None and resume.contact_awake)
+    dt_asleep, bound_asleep = time_step(problem, asleep=True) if sleeps else (dt, bound)
     woke_at = None
     arrays = _rod_arrays(problem)
     state: RodState = problem.state.copy()
@@ -515,7 +515,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
     diagnostics = {
         "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
         # sleeping contact: the step before it woke, and when it woke (None: it never did)
-        "dt_asleep": dt_asleep if problem.contact.enabled and problem.contact.sleep else None,
+        "dt_asleep": dt_asleep if sleeps else None,
         "contact_woke_at": woke_at,
         "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
         "near_rebuilds": near_rebuilds, "max_pairs": max_pairs, "max_penetration": max_pen,
