@@ -41,7 +41,12 @@ def link_escapes(history: dict) -> np.ndarray:
     around an end between two rows' snapshots crosses the closure in two halves (Fig S3 with
     sleeping contact: −1.001 and −0.998 turns, 0.05 s apart, where a −2.0 came in one row
     before)."""
-    jumps = _link_jumps(history)
+    return _merged(_link_jumps(history))
+
+
+def _merged(jumps: np.ndarray) -> np.ndarray:
+    """The jumps with each run of consecutive nonzero rows summed into its last row."""
+    jumps = jumps.copy()
     for row in range(1, len(jumps)):
         if jumps[row] != 0.0 and jumps[row - 1] != 0.0:
             jumps[row] += jumps[row - 1]
@@ -106,7 +111,8 @@ def account_link(result: RunResult, problem: Problem) -> RunResult:
     history, notes = result.history, result.diagnostics.setdefault("notes", [])
     status, message = result.status, result.message
     if problem.ends.start_frame_held and problem.ends.end_frame_held:
-        escapes = link_escapes(history)
+        jumps = _link_jumps(history)
+        escapes = _merged(jumps)
         history["link_escapes"] = np.cumsum(np.abs(escapes) > 0).astype(float)
         events = [{"time": float(history["time"][i]), "delta_link": float(escapes[i])}
                   for i in np.flatnonzero(escapes)]
@@ -120,7 +126,7 @@ def account_link(result: RunResult, problem: Problem) -> RunResult:
         surplus = history["link"] - rotation_put_in(history) / (2 * np.pi)
         baseline = surplus[0] if problem.continued else 0.0
         # row by row, so that an escape booked at its last row is accounted at its first
-        unaccounted = float(np.max(np.abs(surplus - baseline - np.cumsum(_link_jumps(history)))))
+        unaccounted = float(np.max(np.abs(surplus - baseline - np.cumsum(jumps))))
         if unaccounted > LINK_TOLERANCE and status in ("ok", "not_converged"):
             status = "unstable"
             result.diagnostics["guard"] = "link"
@@ -243,6 +249,8 @@ def refined_from_trip(first: RunResult, origin: Problem, problem: Problem, topol
     diagnostics["steps"] = (_steps_until(first, stage, stage_start, at)
                             + second.diagnostics["steps"])
     diagnostics["refined_at"] = at
+    if resume.contact_awake:  # the fine run started awake: contact woke in the coarse one
+        diagnostics["contact_woke_at"] = woke
     diagnostics["notes"] = list(second.diagnostics.get("notes", [])) + [
         f"went on at {problem.rod.elements} elements from the state at t = {at:.4g} s "
         f"({REFINE_BACK:g} s or more before the trip at {tripped:.4g} s), resampled; the "
