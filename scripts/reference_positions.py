@@ -1,4 +1,4 @@
-"""Final state and history of short, coarse versions of the shipped scenes, to an .npz.
+"""Final state, history and snapshots of short, coarse versions of the shipped scenes, to an .npz.
 
 A refactor of the kernel that changes no physics must leave these bit-identical:
 
@@ -58,6 +58,9 @@ def run_all(only=None, extra=()) -> dict[str, np.ndarray]:
         out[f"{name}/status"] = np.array(r.status)
         for column, values in r.history.items():
             out[f"{name}/history/{column}"] = values
+        # the snapshots too: a refined run goes on from one (runner.refined_from_trip)
+        out[f"{name}/snapshot_positions"] = r.snapshot_positions
+        out[f"{name}/snapshot_d1"] = r.snapshot_d1
     return out
 
 

@@ -20,12 +20,19 @@ position Verlet with the two half drifts merged, so positions live at half steps
 loop; damping multiplies velocities by exp(-ν·dt), which is stable for any ν ≥ 0, and is
 applied before the boundary conditions so that prescribed motions are exact.
 
-Every function advance calls is inlined into it (inline="always", at numba's IR level), so
-that its machine code exists once. A callee compiled on its own is linked into advance as a
-linkonce_odr copy that LLVM optimises again with advance; a process that compiles advance
-then binds the call to the callee's own copy, one that loads advance from numba's disk cache
-to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m on the
-reference scenes, tests/test_kernel_cache.py).
+The functions advance calls on every step are inlined into it (inline="always", at numba's
+IR level), so that their machine code exists once. A callee compiled on its own is linked into
+advance as a linkonce_odr copy that LLVM optimises again with advance; a process that compiles
+advance then binds the call to the callee's own copy, one that loads advance from numba's disk
+cache to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m
+on the reference scenes, tests/test_kernel_cache.py). Six functions that run at most at check
+steps (_guards, _shear_guard, _record, _settle_windows, _probe_distance, _start_probe) are
+compiled on their own instead (inline="never"): every inlined call site is IR that numba
+types and lowers again inside advance, and these six cost 12 s of its first compile (60 → 48 s,
+scripts/compile_time.py functions). Their results are the inlined ones to the bit, compiled
+fresh or loaded from the cache (positions, directors, history and snapshots of the reference
+scenes, scripts/reference_positions.py; tests/test_kernel_cache.py). Taken out the same way,
+_drift, rotated_frame, _kinetic_energy and the per-step loads were not: their last bits moved.
 """
 
 from collections import namedtuple
@@ -566,8 +573,9 @@ def _hold_velocities(v, ends, displacement_rate):
 
 # The pieces of one step, in the order advance composes them: controls -> loads (internal,
 # clamps, contact, external) -> kick -> guards -> record -> drift -> settle/equilibrium.
-# Each is inlined into advance (see the module docstring); a piece that can trip a guard
-# returns the status code and advance stops on anything but S_COMPLETED.
+# Each is inlined into advance but for the six check-step pieces the module docstring names; a
+# piece that can trip a guard returns the status code and advance stops on anything but
+# S_COMPLETED.
 
 ControlValues = namedtuple("ControlValues", [
     "end_rotation", "start_rotation", "displacement", "displacement_rate", "end_force",
@@ -882,7 +890,7 @@ def _axial_damping(x, v, inv_mass, rest_length, axial_stiffness, f_axial, eta, d
         v[2, i] += a * t2[min(i, n - 1)] - b * t2[max(i - 1, 0)]
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _guards(v, w, force, torque, ends, node_mass, inertia, rest_length, r2, speed_limit, info):
     """Residual (largest nodal force and element torque per length on free degrees of
     freedom), kinetic energy, and the non-finite and speed guards.
@@ -921,7 +929,7 @@ def _guards(v, w, force, torque, ends, node_mass, inertia, rest_length, r2, spee
     return S_COMPLETED, res, kin
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _shear_guard(x, Q, info):
     """S_SHEAR if an element's d3 is more than 45° off its tangent (info: where, the angle
     in rad), else S_COMPLETED. Checked with the other guards, every check_every steps."""
@@ -941,7 +949,7 @@ def _shear_guard(x, Q, info):
     return S_COMPLETED
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _record(row, x, v, Q, w, force, dt, t_next, end_force, force_dir, axis, end_position,
             tables, clamp_torque, energies, kinetic, touching, worst, residual, f_stiff,
             f_radius, contact_energy, out):
@@ -999,7 +1007,7 @@ def _drift(x, v, Q, w, h):
     rotate_frames(Q, w, h)
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equilibrium_after,
                     window_sum, window_squares, window_mean, window_count, window_start,
                     have_mean, settle_motion, settled):
@@ -1050,7 +1058,7 @@ def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equili
     return window_count, window_start, have_mean, settle_motion, settled
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _probe_distance(x, probe_reference, probe_shape, probe_size, probe_norm2):
     """(largest node distance from the probed candidate, the probe's remaining component
     along its shape as a fraction of the probe)."""
@@ -1068,7 +1076,7 @@ def _probe_distance(x, probe_reference, probe_shape, probe_size, probe_norm2):
     return away, along
 
 
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _start_probe(x, probe_reference, probe_shape, probe_size):
     """Displace the candidate equilibrium by probe_size along probe_shape."""
     n = x.shape[1] - 1
@@ -1167,11 +1175,14 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     window_sum = np.zeros((6, n + 1))
     window_squares = np.zeros((6, n + 1))
     window_mean = np.zeros((6, n + 1))
-    window_count = 0
+    # typed int64 and bool from the start: a literal 0 or False here would have numba compile
+    # the callees that take them (_settle_windows, _record: not inlined) once more, for the
+    # literal types its type inference meets first
+    window_count = np.int64(0)
     window_start = t_start
-    have_mean = False
+    have_mean = np.bool_(False)
     settle_motion = np.inf
-    settled = False
+    settled = np.bool_(False)
 
     force = np.zeros((3, n + 1))
     torque = np.zeros((3, n))
@@ -1249,7 +1260,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
 
     info[D_SETTLED] = 0.0
     t = t_start
-    rows = 0
+    rows = np.int64(0)  # int64 from the start, as window_count above (_record)
     status = S_COMPLETED
     steps = 0
 
@@ -1436,10 +1447,10 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                     # the shape test starts afresh: the windows before the probe say nothing
                     window_sum[:, :] = 0.0
                     window_squares[:, :] = 0.0
-                    window_count = 0
+                    window_count = np.int64(0)
                     window_start = t
-                    have_mean = False
-                    settled = False
+                    have_mean = np.bool_(False)
+                    settled = np.bool_(False)
         if accept:
             status = S_EQUILIBRIUM
             info[D_SETTLED] = 0.0 if residual < tolerance and kinetic < tolerance * tolerance else 1.0
