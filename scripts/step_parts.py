@@ -263,16 +263,9 @@ def measure(point: dict, elements: int, log) -> dict:
     parts[f"candidate list rebuild ({grid_us:.1f} µs for {n_pairs} pairs, every "
           f"{grid_every:.0f} steps)"] = grid_us / grid_every
 
-    touching = []
-    for p in range(n_near):
-        i, j = near[0, p], near[1, p]
-        u = x[:, i + 1] - x[:, i]
-        w = x[:, j + 1] - x[:, j]
-        r = x[:, i] - x[:, j]
-        s, t = K.closest_parameters(*r, *u, *w, 1.0 / u.dot(u), 1.0 / w.dot(w))
-        if np.linalg.norm(r + s * u - t * w) < radius[i] + radius[j]:
-            touching.append((i, j))
-    newton = newton_sizes(n, np.array(touching, dtype=np.int64).reshape(-1, 2))
+    # the touching pairs are the ones the force loop noted for the implicit dashpot
+    touching = np.stack([dashpots[0, :noted], dashpots[2, :noted]], axis=1).astype(np.int64)
+    newton = newton_sizes(n, touching)
     return {"point": point, "elements": n, "status": result.status, "steps": d["steps"],
             "cpu": cpu, "step_us": 1e6 * cpu / d["steps"],
             "free_step_us": 1e6 * free_cpu / free_steps, "parts": parts, "newton": newton,

@@ -422,6 +422,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
         stage_steps = 0
         first_call = True
         rod_properties = k.RodProperties(local_mask=_local_mask(n, controls.segment), **arrays)
+        probe = probe_shape(n, ends.axis, problem.solver.probe_seed + index)
         while True:
             # one kernel call, or two if sleeping contact wakes within the stage: the second
             # goes on from the same time with contact on and its own time step
@@ -444,8 +445,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
             info = np.zeros(k.N_INFO)
             arguments = (state.x, state.v, state.Q, state.w, float(state.time), int(n_steps),
                          rod_properties, boundary, settings,
-                         k.ControlTables(table_t, table_v, table_n),
-                         probe_shape(n, ends.axis, problem.solver.probe_seed + index),
+                         k.ControlTables(table_t, table_v, table_n), probe,
                          k.Output(hist, snap_x, snap_d, info))
             # the law is a specialization of advance (see its docstring): the paper's is called
             # exactly as before the option existed
