@@ -48,7 +48,7 @@ def solver_from(cfg) -> Solver:
                   quadratic_drag=s.quadratic_drag, strain_rate_damping=s.strain_rate_damping,
                   settle_window=s.settle_window,
                   stability_probe=s.stability_probe, probe_size=s.probe_size,
-                  probe_seed=cfg.rod.seed)
+                  static_stability=s.static_stability, probe_seed=cfg.rod.seed)
 
 
 def ends_from(cfg) -> Ends:
@@ -153,10 +153,11 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
 def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_target: float):
     """(state, clamp reference, turns) of a twist_under_load run started on the straight
     branch: the rod stretched to the load's extension e (its nodes evenly spaced, as the
-    uniform equilibrium has them) and twisted uniformly by `fraction` of the clamped-Greenhill
-    buckling twist, or by the first target if that is less; the clamp reference is the
-    untwisted frame, so that the end rotation control carries the turns already in."""
-    from .theory import straight_rod_buckling_turns
+    uniform equilibrium has them) and twisted uniformly by `fraction` of the model's own
+    buckling twist (rod/onset.py: the perfect rod at this resolution, with its shear and
+    stretch), or by the first target if that is less; the clamp reference is the untwisted
+    frame, so that the end rotation control carries the turns already in."""
+    from .rod.onset import straight_equilibrium, straight_onset_turns
 
     e = cfg.ends
     needs = {"ends.start": (e.start, "clamped"), "ends.end_axial": (e.end_axial, "force"),
@@ -176,16 +177,15 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
     if any(cfg.physics.gravity):
         raise C.ConfigError("physics.gravity", list(cfg.physics.gravity),
                             "[0, 0, 0] with loading.quasi_static_below > 0")
-    onset = straight_rod_buckling_turns(force, rod.youngs_modulus, rod.shear_modulus,
-                                        rod.radius, rod.length)
+    extension = C.straight_extension(cfg)
+    # 1e-4 of the onset is far inside the margin 1 - fraction >= 0.05, at a third of the cost
+    onset = straight_onset_turns(rod, extension, tolerance=1e-4)
     turns = math.copysign(min(abs(first_target), fraction * onset), first_target)
-    twisted = straight_state(rod, twist_turns=turns)
-    # along the axis from the origin: every element stretched to the load's extension e
-    twisted.x *= C.straight_extension(cfg)
-    # the untwisted straight rod's frames are all alike, and so are its clamp frames (what
-    # clamp_frames extrapolates from them, exactly: the rotation between elements is none)
-    untwisted = np.ascontiguousarray(straight_state(rod).Q[:, :, 0])
-    return twisted, (untwisted, untwisted.copy()), turns
+    # along the axis from the origin, every element stretched to the load's extension e; the
+    # clamp reference is the untwisted straight rod's frame (all its frames are alike, and so
+    # are the frames clamp_frames would extrapolate from them)
+    start = straight_equilibrium(rod, extension, turns)
+    return start.state, start.clamp_reference, turns
 
 
 def solenoid_loss(cfg) -> Problem:

@@ -127,10 +127,12 @@ def test_a_rod_without_a_known_onset_is_refused_by_name(override, key):
     assert caught.value.path == key
 
 
-def test_fraction_outside_zero_to_one_is_refused():
-    with pytest.raises(C.ConfigError) as caught:
-        C.load_scene("twist_under_load", [("loading.quasi_static_below", 1.5)], SCENES)
-    assert caught.value.path == "loading.quasi_static_below"
+def test_fraction_outside_zero_to_0_95_is_refused():
+    # 1.0 would start on the onset itself, marginally stable
+    for fraction in (1.5, 1.0):
+        with pytest.raises(C.ConfigError) as caught:
+            C.load_scene("twist_under_load", [("loading.quasi_static_below", fraction)], SCENES)
+        assert caught.value.path == "loading.quasi_static_below"
 
 
 def test_a_continuation_starts_stretched_and_keeps_its_samples():
@@ -153,3 +155,28 @@ def test_a_continued_run_cannot_also_start_on_the_straight_branch(tmp_path):
         C.load_scene("twist_under_load", [("loading.quasi_static_below", 0.8),
                                           ("initial_state", f"{tmp_path}/a.h5#run")], SCENES)
     assert caught.value.path == "loading.quasi_static_below"
+
+
+def test_at_twice_the_length_the_start_is_below_the_models_own_onset():
+    # L/L0 = 2.0, the top of the extension axis. The unsheared clamped Greenhill twist is 1.6
+    # times the model's own onset there (54.0 against 33.8 turns at 80 elements), so 0.8 of it
+    # started the run on an unstable straight rod (above L/L0 = 1.47 it did). The start is now
+    # 0.8 of the model's onset (rod/onset.py), and the static test finds it stable, where the
+    # old start is not (1.28 of the onset: 34 growing modes).
+    from rodphase.rod import static
+    from rodphase.rod.onset import StraightBranch, straight_onset_turns
+    from rodphase.rod.simulate import static_model_of
+    from rodphase.scenes import rod_from
+
+    base = [("rod.elements", 80), ("loading.force_multiple", None), ("loading.extension", 2.0),
+            ("loading.twist_density", None), ("loading.twist_turns", 60.0),
+            ("loading.quasi_static_below", 0.8)]
+    cfg = C.load_scene("twist_under_load", base, SCENES)
+    problem = build(cfg)
+    onset = straight_onset_turns(rod_from(cfg), 2.0)
+    rotation = problem.stages[0].controls.end_rotation[1][0]
+    assert rotation == pytest.approx(2 * math.pi * 0.8 * onset, rel=1e-4)
+    branch = StraightBranch(rod_from(cfg), 2.0)
+    for turns, stable in ((0.8 * onset, True), (0.8 * onset_turns(cfg), False)):
+        start = branch.problem(turns)
+        assert static.stability(static_model_of(start), start.state.x, start.state.Q).stable == stable

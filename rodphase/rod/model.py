@@ -268,6 +268,11 @@ class Solver:
     probe_return: float = 0.1
     probe_leave: float = 3.0
     probe_seed: int = 0
+    # With stability_probe, a candidate that does not touch itself must also be stable by the
+    # model's own stiffness (rod/static.py): the probe's few sine modes miss the slow helical
+    # pair that goes unstable first on a twisted straight rod (issue #32). If it is not, the
+    # rod is pushed by probe_size along its most unstable mode and the hold goes on.
+    static_stability: bool = setting(True)
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..result import HISTORY_COLUMNS, RunResult
 from . import kernel as k
+from . import static
 from .model import Controls, Ends, Problem, RodState, Table, stable_time_step
 
 
@@ -158,6 +159,32 @@ def _kernel_inputs(problem: Problem, ends: Ends, dt: float, history_every: int,
         probe_leave=float(solver.probe_leave),
     )
     return boundary, settings
+
+
+def control_values(controls: Controls, t: float, shift: float = 0.0) -> np.ndarray:
+    """(N_TABLES,) the control values at time t (tables start at `shift`), as the kernel reads
+    them: piecewise linear, constant beyond both ends of each table."""
+    return np.array([np.interp(t, np.asarray(ts, float) + shift, np.asarray(vs, float))
+                     for ts, vs in controls.tables()])
+
+
+def static_model_of(problem: Problem, controls: Controls | None = None, time: float = math.inf,
+                    ends: Ends | None = None, shift: float = 0.0) -> static.StaticModel:
+    """The static view (rod/static.py) of `problem` under `controls` (default the problem's)
+    at `time` (default: their final values), with its ends (default the problem's), the same
+    rod arrays and boundary the kernel gets."""
+    controls = controls if controls is not None else problem.controls
+    ends = ends if ends is not None else problem.ends
+    n = problem.rod.elements
+    start_frame, end_frame = clamp_reference(problem)
+    x = problem.state.x
+    boundary, settings = _kernel_inputs(problem, ends, 1.0, 1, False, 0.0, controls,
+                                        x[:, 0].copy(), x[:, n].copy(), start_frame, end_frame,
+                                        False)
+    rod = k.RodProperties(local_mask=_local_mask(n, controls.segment), **_rod_arrays(problem))
+    return static.static_model(rod, boundary, control_values(controls, time, shift),
+                               incompressible=settings.incompressible,
+                               neo_hookean=problem.rod.law != "paper")
 
 
 def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:
@@ -423,6 +450,7 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
         first_call = True
         rod_properties = k.RodProperties(local_mask=_local_mask(n, controls.segment), **arrays)
         probe = probe_shape(n, ends.axis, problem.solver.probe_seed + index)
+        static_tests, static_unstable = 0, 0
         while True:
             # one kernel call, or two if sleeping contact wakes within the stage: the second
             # goes on from the same time with contact on and its own time step
@@ -466,6 +494,28 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
             rows_x.append(snap_x[:rows])
             rows_d.append(snap_d[:rows])
             stage_ids.append(np.full(rows, index))
+            if (code == k.S_EQUILIBRIUM and settings.probe and problem.solver.static_stability
+                    and rows and hist[rows - 1, k.H_CONTACTS] == 0):
+                # the kernel's probe passed; the model's own stiffness has the last word
+                static_tests += 1
+                verdict = static.stability(
+                    static_model_of(problem, controls, state.time, ends, shift), state.x,
+                    state.Q)
+                if not verdict.stable and state.time < stage_end:
+                    static_unstable += 1
+                    notes.append(
+                        f"{stage.label or f'stage {index}'}: the equilibrium at t = "
+                        f"{state.time:.4g} s was unstable by the model's stiffness "
+                        f"({verdict.unstable_modes} growing modes, lowest ω² = "
+                        f"{verdict.lowest:.3g} s⁻²); pushed by {settings.probe_size:.3g} m "
+                        "along the most unstable one")
+                    state.x[:], state.Q[:] = static.displaced(
+                        state.x, state.Q, verdict.mode, verdict.mode_rotation,
+                        settings.probe_size)
+                    state.v[:] = 0.0
+                    state.w[:] = 0.0
+                    first_call = False
+                    continue
             if code != k.S_WAKE:
                 break
             asleep = False
@@ -475,6 +525,8 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
         stage_states.append((state.positions, state.directors))
         label = stage.label or f"stage {index}"
         stage_report.append(_stage_entry(stage, label, stage_steps, state.time, code, info))
+        if static_tests:
+            stage_report[-1].update(static_tests=static_tests, static_unstable=static_unstable)
         if code in k.GUARDS:
             status = "unstable"
             guard, guard_words, unit, advice = k.GUARDS[code]

@@ -1,0 +1,190 @@
+"""Where the straight, stretched and twisted rod loses stability: the model's own onset.
+
+The straight rod clamped at both ends, its end free to slide along the axis under a constant
+load and turned by θ, is an equilibrium at every θ: stretched uniformly to the load's
+extension e and twisted uniformly (every element alike, the clamp springs included). It is
+stable up to the twist θ_c at which a pair of helical modes crosses zero stiffness. That θ_c
+is found here from the discrete model's own stiffness (rod/static.py), so it carries
+everything the model has: shear, extensibility, the 1/e and 1/e³ factors of the law, the
+clamps' half elements and the resolution. The clamped Greenhill twist (theory.py) is its
+limit for an unshearable, inextensible rod and n → ∞ (tests/test_onset.py).
+
+On the straight branch the lateral unknowns (node displacements across the axis, frame
+rotations about d1 and d2) decouple to first order from the axial and twist ones, and the
+critical pair lives in that lateral block: θ_c is where the symmetric part of its
+mass-scaled stiffness stops being positive definite. (The whole stiffness's symmetric part
+stops being so at ~0.7 θ_c through an axial–twist coupling of the paper's law, which is no
+instability: rod/static.py.) The test checks that this agrees with the eigenvalues of the
+non-symmetric stiffness.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.linalg
+from scipy.optimize import brentq
+
+from ..units import TURN
+from . import kernel as k
+from . import static
+from .model import Controls, Ends, Problem, Rod, RodState, constant, straight_state
+
+# the twist_under_load ends: clamped start; the end held across the axis, free along it,
+# its frame turned by the rotation control
+LOADED_ENDS = Ends(start_held=(True, True, True), start_frame_held=True,
+                   end_held=(True, True, False), end_frame_held=True)
+
+
+def straight_equilibrium(rod: Rod, extension: float, turns: float,
+                         ends: Ends = LOADED_ENDS, force: float | None = None) -> Problem:
+    """The straight rod stretched to `extension` (each element e·l0 long) and twisted uniformly
+    by `turns`, as a Problem: its clamp reference is the untwisted frame and its end rotation
+    control carries the turns (as the quasi-static start of twist_under_load builds it). The
+    end force (default: the one the law needs for that extension untwisted) does not enter
+    the stiffness of the straight state except through e. Under the paper's law the state is
+    the equilibrium at every twist; under a conservative law the twist also lengthens the rod
+    (StraightBranch.problem solves for the stretch that balances the force then)."""
+    twisted: RodState = straight_state(rod, axis=ends.axis, twist_turns=turns)
+    twisted.x *= extension
+    untwisted = np.ascontiguousarray(straight_state(rod, axis=ends.axis).Q[:, :, 0])
+    axial = rod.axial_stiffness
+    # the end force in equilibrium with the stretch: the paper's law E·A0·(1 − 1/e) (per
+    # current area, A0/e), the neo-Hookean one E·A0/3·(e − 1/e²); compressible: E·A0·(e − 1)
+    if force is not None:
+        pass
+    elif not rod.incompressible:
+        force = axial * (extension - 1.0)
+    elif rod.law == "neo_hookean":
+        force = axial / 3.0 * (extension - extension**-2)
+    else:
+        force = axial * (1.0 - 1.0 / extension)
+    controls = Controls(end_force=constant(force), end_rotation=constant(TURN * turns))
+    return Problem(rod=rod, state=twisted, ends=ends, controls=controls,
+                   clamp_reference=(untwisted, untwisted.copy()))
+
+
+class StraightBranch:
+    """The straight equilibria of one rod at one extension, θ the parameter: the static model
+    is built once, and each twist only turns the frames and the end rotation control."""
+
+    def __init__(self, rod: Rod, extension: float, ends: Ends = LOADED_ENDS):
+        from .simulate import static_model_of  # simulate drives the kernel; it imports static
+
+        self.rod, self.extension, self.ends = rod, extension, ends
+        self.model = static_model_of(straight_equilibrium(rod, extension, 0.0, ends))
+        model = self.model
+        axis = np.abs(np.asarray(ends.axis, float))
+        along = int(np.argmax(axis))
+        if not np.isclose(axis[along], 1.0):
+            raise ValueError(f"ends.axis {tuple(ends.axis)}: the onset needs a rod along x, y "
+                             "or z")
+        # the lateral unknowns, in rod order so that their block is banded (an unknown
+        # reaches static.REACH blocks): positions across the axis, rotations about d1 and d2
+        m = model.positions
+        n = (model.unknowns - m) // 3
+        keep = np.concatenate([np.flatnonzero(model.free[0] != along),
+                               m + 3 * np.arange(n), m + 3 * np.arange(n) + 1])
+        self.lateral = keep[np.argsort(model.block_of[keep], kind="stable")]
+        blocks = model.block_of[self.lateral]
+        self.width = int(np.max(np.searchsorted(blocks, blocks + static.REACH, side="right")
+                                - 1 - np.arange(len(blocks))))
+
+    def problem(self, turns: float) -> Problem:
+        """The straight equilibrium at `turns` under the end force of `extension` untwisted."""
+        base = straight_equilibrium(self.rod, self.extension, turns, self.ends)
+        if self.rod.law == "paper":
+            return base  # its twist does not load the axis: the same stretch at every twist
+        # a conservative law's twist energy GJ0·Φ²/(2e) falls as the rod stretches: twisted,
+        # it lengthens under the same force (the Poynting effect of twisted wires)
+        force = float(self.model.now[k.T_END_FORCE])
+        now = self.model.now.copy()
+        now[k.T_END_ROTATION] = TURN * turns
+        model = dataclasses.replace(self.model, now=now)
+        n = self.rod.elements
+        end = int(np.flatnonzero(model.free[1] == n)[0])  # node n's one free component
+
+        def unbalanced(e: float) -> float:
+            state = straight_equilibrium(self.rod, e, turns, self.ends, force).state
+            return float(static.loads(model, state.x, state.Q)[end])
+
+        e = brentq(unbalanced, 0.5, 2.0 * self.extension, xtol=1e-14, rtol=1e-13)
+        return straight_equilibrium(self.rod, e, turns, self.ends, force)
+
+    def lateral_band(self, turns: float) -> np.ndarray:
+        """The symmetric part of the mass-scaled lateral stiffness at `turns`, in LAPACK's
+        upper banded storage ((width + 1, N): row width − d holds diagonal d)."""
+        state = self.problem(turns).state
+        now = self.model.now.copy()
+        now[k.T_END_ROTATION] = TURN * turns
+        model = dataclasses.replace(self.model, now=now)
+        K = static.stiffness_matrix(model, state.x, state.Q, columns=self.lateral)
+        s = 1.0 / np.sqrt(static.masses(model, state.x)[self.lateral])
+        A = K[np.ix_(self.lateral, self.lateral)] * s[:, None] * s[None, :]
+        band = np.zeros((self.width + 1, len(self.lateral)))
+        for d in range(self.width + 1):
+            band[self.width - d, d:] = 0.5 * (np.diagonal(A, d) + np.diagonal(A, -d))
+        return band
+
+    def stable(self, turns: float) -> bool:
+        """The lateral block's symmetric part is positive definite: its banded Cholesky
+        factorization exists."""
+        try:
+            scipy.linalg.cholesky_banded(self.lateral_band(turns), check_finite=False)
+            return True
+        except np.linalg.LinAlgError:
+            return False
+
+    def lowest(self, turns: float) -> float:
+        """The smallest eigenvalue [1/s²] of that symmetric part: > 0 below the onset."""
+        return float(scipy.linalg.eig_banded(self.lateral_band(turns), eigvals_only=True,
+                                             select="i", select_range=(0, 0),
+                                             check_finite=False)[0])
+
+    def onset_turns(self, tolerance: float = 1e-6) -> float:
+        """θ_c [turns], relative accuracy `tolerance`: bisection on the Cholesky test (a
+        factorization costs a twentieth of an eigenvalue; the stiffness dominates)."""
+        # bracketed around the unsheared clamped Greenhill twist: the model's onset lies at
+        # 0.85-0.97 of it for the paper's rod (shear), and the bracket widens for any other
+        guess = _greenhill_guess(self.rod, self.extension)
+        lo, hi = 0.7 * guess, 1.05 * guess
+        while not self.stable(lo):
+            lo, hi = 0.5 * lo, lo
+        while self.stable(hi):
+            lo, hi = hi, 1.5 * hi
+            if hi > 20 * guess:
+                raise ValueError(f"no onset below {hi:.3g} turns at L/L0 = {self.extension:g}")
+        while hi - lo > tolerance * hi:
+            mid = 0.5 * (lo + hi)
+            if self.stable(mid):
+                lo = mid
+            else:
+                hi = mid
+        return 0.5 * (lo + hi)
+
+
+def straight_onset_turns(rod: Rod, extension: float, *, ends: Ends = LOADED_ENDS,
+                         tolerance: float = 1e-6) -> float:
+    """θ_c [turns]: the end rotation at which the straight rod of `rod` (its own elements,
+    stiffnesses and law; no imperfection), stretched to `extension` and clamped as `ends`
+    hold it, loses stability. Relative accuracy `tolerance` in θ."""
+    return StraightBranch(_perfect(rod), extension, ends).onset_turns(tolerance)
+
+
+def _perfect(rod: Rod) -> Rod:
+    return dataclasses.replace(rod, rest_curvature=(0.0, 0.0, 0.0))
+
+
+def _greenhill_guess(rod: Rod, extension: float) -> float:
+    """The unsheared clamped Greenhill twist of the rod stretched to `extension`, in turns:
+    M_c·L/(C/e²) with the current length e·L0, B/e² and the tension of the paper's law."""
+    from ..theory import greenhill_clamped_moment
+
+    e = extension
+    bending = rod.bending_stiffness / e**2
+    twist = rod.twist_stiffness / e**2
+    tension = rod.axial_stiffness * (1.0 - 1.0 / e)
+    moment = greenhill_clamped_moment(tension, e * rod.length, bending)
+    return moment * e * rod.length / twist / TURN
+

@@ -1,0 +1,354 @@
+"""The rod at rest: its static residual, stiffness and stability, on the kernel's own physics.
+
+A state (x, Q) of a Problem at given control values is an equilibrium when the loads the
+explicit kernel would compute for it at rest (v = w = 0) vanish on its free degrees of
+freedom. `loads_at_rest` composes exactly the pieces `kernel.advance` composes in a step
+(internal_loads or its neo-Hookean twin, the clamp couples, the external loads), so there
+is one copy of every law; self-contact is left out (the static model covers states that do
+not touch themselves: `touching` below says when that holds).
+
+Unknowns (`StaticModel.unknowns`):
+    the free position components of the nodes (held components are not unknowns), then a
+    small body rotation δφ_i of every element in its material frame, applied as the kernel
+    turns frames: Q_i ← exp(−[δφ_i]×)·Q_i. Their conjugate loads are the nodal forces (lab) and
+    the element torques (material frame), the pairing whose product is the power the kernel's
+    kick uses.
+
+The stiffness K = −∂(loads)/∂(unknowns) comes from central differences, all columns whose
+loads cannot overlap taken at once (a distance colouring of the rod's band: a node or an
+element reaches loads at most REACH blocks away). The dynamics near an equilibrium is
+M·ü = −K·u (M: node masses, and the rotary inertia over e as the kick scales it), so the
+eigenvalues λ of M⁻¹K are ω²: a real λ < 0 is a mode that grows (divergence).
+
+What the stability test can and cannot prove (`stability`):
+- The paper's law is not the gradient of an energy, so K is not symmetric. If the symmetric
+  part of M^{-1/2}·K·M^{-1/2} is positive definite (its Cholesky factorization exists), every
+  eigenvalue of M⁻¹K has a positive real part: the state is stable against divergence. That
+  is sufficient, not necessary: on the twisted straight rod an axial–twist coupling makes the
+  whole symmetric part indefinite from ~0.7 of the onset on, where the rod is still stable.
+- Otherwise the eigenvalues of M⁻¹K decide: a real part below zero is a growing mode. This
+  is exact for divergence, which is how a twisted rod loses stability (its critical pair of
+  helical modes crosses zero together, so det K does not change sign: count eigenvalues,
+  never read a determinant). It does not see flutter (a complex pair whose damped growth
+  the kernel's damping could allow): none is known in these scenes.
+- It says nothing about states in self-contact (the static model has no contact) and is
+  local: a stable state can still be left by a finite push (the subcritical snap of a
+  solenoid).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.linalg
+
+from . import kernel as k
+from ._jit import njit
+from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
+from .neo_hookean import clamp_couple_neo_hookean, internal_loads_neo_hookean
+
+# a node's position or an element's frame changes loads at most this many blocks away
+# (block b = node b and element b): element lengths feed the Voronoi dilatations on both sides
+REACH = 3
+
+
+@njit(cache=True)
+def loads_at_rest(x, Q, rod, ends, incompressible, neo_hookean, now, force, torque):
+    """Forces (3, n+1) on nodes [N, lab] and torques (3, n) on elements [N m, material frame]
+    of the state (x, Q) at rest, with the control values `now` (N_TABLES,) indexed as the
+    kernel's tables (T_*). The composition of one kernel step's loads without contact."""
+    n = Q.shape[2]
+    v = np.zeros((3, n + 1))
+    w = np.zeros((3, n))
+    dilatation = np.ones(n)
+    lengths = rod.rest_length.copy()
+    energies = np.zeros(4)
+    work = np.zeros((max(k.N_WORK, N_WORK_NEO_HOOKEAN), n))
+    clamp = np.empty((3, 3))
+    couple = np.empty(8)
+    f_stiff = now[k.T_STIFFNESS]
+    f_radius = now[k.T_RADIUS]
+    r2 = f_radius * f_radius
+    fb = f_stiff * r2 * r2
+    f_radius_inv = 1.0 / f_radius
+    if neo_hookean:
+        internal_loads_neo_hookean(x, v, Q, w, rod.rest_length, rod.rest_voronoi, rod.inertia,
+                                   rod.shear_stiffness, rod.bend_stiffness, rod.rest_curvature,
+                                   rod.rest_shear, rod.local_mask, f_stiff * r2, fb, r2 * r2,
+                                   f_radius_inv, now[k.T_LOCAL_TWIST], force, torque,
+                                   dilatation, lengths, energies, work, couple)
+    else:
+        k.internal_loads(x, v, Q, w, rod.rest_length, rod.rest_voronoi, rod.inertia,
+                         rod.shear_stiffness, rod.bend_stiffness, rod.rest_curvature,
+                         rod.rest_shear, rod.local_mask, incompressible, f_stiff * r2, fb,
+                         r2 * r2, f_radius_inv, now[k.T_LOCAL_TWIST], force, torque, dilatation,
+                         lengths, energies, work)
+    axis = ends.axis
+    rc = rod.rest_curvature
+    bs = rod.bend_stiffness
+    if ends.start_frame_held:
+        if neo_hookean:
+            k.rotated_frame(ends.start_frame, axis, now[k.T_START_ROTATION], clamp)
+            clamp_couple_neo_hookean(clamp, Q[:, :, 0], 0, x, rod.rest_length, rc[0, 0],
+                                     rc[1, 0], f_radius_inv * rc[2, 0], fb * bs[0, 0],
+                                     fb * bs[1, 0], fb * bs[2, 0], False, torque, force,
+                                     energies, couple)
+        else:
+            k._start_clamp_couple(Q, rod, ends.start_frame, axis, now[k.T_START_ROTATION],
+                                  dilatation, f_radius_inv, fb, incompressible, torque,
+                                  energies, clamp, couple)
+    if ends.end_frame_held:
+        if neo_hookean:
+            k.rotated_frame(ends.end_frame, axis, now[k.T_END_ROTATION], clamp)
+            clamp_couple_neo_hookean(Q[:, :, n - 1], clamp, n - 1, x, rod.rest_length,
+                                     rc[0, n - 2], rc[1, n - 2], f_radius_inv * rc[2, n - 2],
+                                     fb * bs[0, n - 2], fb * bs[1, n - 2], fb * bs[2, n - 2],
+                                     True, torque, force, energies, couple)
+        else:
+            k._end_clamp_couple(Q, rod, ends.end_frame, axis, now[k.T_END_ROTATION],
+                                dilatation, f_radius_inv, fb, incompressible, torque,
+                                energies, clamp, couple)
+    k._external_loads(x, rod.node_mass, r2, now[k.T_END_FORCE], ends.force_direction,
+                      ends.gravity, now[k.T_LOCAL_PULL], ends.segment_first, ends.segment_last,
+                      force)
+
+
+@njit(cache=True)
+def _gather(force, torque, free, out):
+    """The loads on the unknowns: forces on the free position components, then torques."""
+    m = free.shape[1]
+    n = torque.shape[1]
+    for j in range(m):
+        out[j] = force[free[0, j], free[1, j]]
+    for i in range(n):
+        for c in range(3):
+            out[m + 3 * i + c] = torque[c, i]
+
+
+@njit(cache=True)
+def residual(x, Q, rod, ends, incompressible, neo_hookean, now, free, out):
+    """out (m + 3n,): the loads on the unknowns of state (x, Q) at rest (zero at equilibrium)."""
+    n = Q.shape[2]
+    force = np.zeros((3, n + 1))
+    torque = np.zeros((3, n))
+    loads_at_rest(x, Q, rod, ends, incompressible, neo_hookean, now, force, torque)
+    _gather(force, torque, free, out)
+
+
+@njit(cache=True)
+def stiffness(x, Q, rod, ends, incompressible, neo_hookean, now, free, block_of, columns,
+              stride, h_position, h_rotation, K):
+    """K (N, N) = −∂(loads on the unknowns)/∂(unknowns) at (x, Q), by central differences;
+    only the columns where `columns` (N,) is true (the others are left zero).
+
+    Columns are taken `stride` blocks apart at once (block_of (N,): each unknown's block);
+    with stride ≥ 2·REACH + 1 their loads do not overlap, and a column keeps only the rows
+    within REACH blocks of its own. stride > the number of blocks gives the plain dense
+    difference, one column at a time. x and Q are restored exactly (copies are perturbed).
+    """
+    N = block_of.shape[0]
+    m = free.shape[1]
+    n = Q.shape[2]
+    blocks = n + 1
+    plus = np.empty(N)
+    minus = np.empty(N)
+    force = np.zeros((3, n + 1))
+    torque = np.zeros((3, n))
+    for r in range(N):
+        for c in range(N):
+            K[r, c] = 0.0
+    step = np.zeros((3, n + 1))
+    turn = np.zeros((3, n))
+    for kind in range(6):  # position component or rotation component, one per column group
+        for first in range(min(stride, blocks)):
+            # the unknowns of this colour: kind `kind` in blocks first, first + stride, ...
+            step[:, :] = 0.0
+            turn[:, :] = 0.0
+            any_column = False
+            for j in range(N):
+                if (block_of[j] - first) % stride != 0 or not columns[j]:
+                    continue
+                if j < m and kind == free[0, j]:
+                    step[free[0, j], free[1, j]] = h_position
+                    any_column = True
+                elif j >= m and kind == 3 + (j - m) % 3:
+                    turn[(j - m) % 3, (j - m) // 3] = h_rotation
+                    any_column = True
+            if not any_column:
+                continue
+            # ± the steps; frames turned as the kernel's drift turns them (exp(∓[φ]×)·Q,
+            # exactly the identity where φ = 0)
+            xp = x + step
+            xm = x - step
+            Qp = Q.copy()
+            Qm = Q.copy()
+            k.rotate_frames(Qp, turn, 1.0)
+            k.rotate_frames(Qm, turn, -1.0)
+            loads_at_rest(xp, Qp, rod, ends, incompressible, neo_hookean, now, force, torque)
+            _gather(force, torque, free, plus)
+            loads_at_rest(xm, Qm, rod, ends, incompressible, neo_hookean, now, force, torque)
+            _gather(force, torque, free, minus)
+            for j in range(N):
+                b = block_of[j]
+                if (b - first) % stride != 0 or not columns[j]:
+                    continue
+                if not ((j < m and kind == free[0, j]) or (j >= m and kind == 3 + (j - m) % 3)):
+                    continue
+                h = h_position if j < m else h_rotation
+                for r in range(N):
+                    if stride <= blocks and abs(block_of[r] - b) > REACH:
+                        continue
+                    K[r, j] = -(plus[r] - minus[r]) / (2.0 * h)
+
+
+@dataclasses.dataclass(frozen=True)
+class StaticModel:
+    """A Problem's rod, ends and control values, as the static functions take them.
+
+    free (2, m) int64: (component, node) of each free position unknown; block_of (N,): the
+    block (node b / element b) of each unknown, N = m + 3n; mass (N,): the inertia each
+    unknown has in the kernel's kick [kg for positions, kg m² for rotations, the latter over
+    the element's dilatation e for the paper's incompressible law, set by `masses`].
+    """
+
+    rod: k.RodProperties
+    ends: k.Boundary
+    incompressible: bool
+    neo_hookean: bool
+    now: np.ndarray
+    free: np.ndarray
+    block_of: np.ndarray
+    length_scale: float  # m: the element length, for finite-difference steps
+
+    @property
+    def unknowns(self) -> int:
+        return self.block_of.shape[0]
+
+    @property
+    def positions(self) -> int:
+        return self.free.shape[1]
+
+
+def static_model(rod: k.RodProperties, ends: k.Boundary, now: np.ndarray, *,
+                 incompressible: bool, neo_hookean: bool) -> StaticModel:
+    """The unknowns of a rod held by `ends`: every node component not held, every frame."""
+    n = rod.rest_length.shape[0]
+    free = []
+    for i in range(n + 1):
+        for c in range(3):
+            held = (i == 0 and ends.start_held[c]) or (i == n and ends.end_held[c])
+            if not held:
+                free.append((c, i))
+    free = np.array(free, dtype=np.int64).T.reshape(2, -1).copy()
+    block_of = np.concatenate([free[1], np.repeat(np.arange(n), 3)]).astype(np.int64)
+    return StaticModel(rod, ends, bool(incompressible), bool(neo_hookean),
+                       np.asarray(now, dtype=float), free, block_of,
+                       float(np.mean(rod.rest_length)))
+
+
+def loads(model: StaticModel, x: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """(N,) loads on the unknowns of the state (x (3, n+1), Q (3, 3, n)) at rest."""
+    out = np.empty(model.unknowns)
+    residual(x, Q, model.rod, model.ends, model.incompressible, model.neo_hookean, model.now,
+             model.free, out)
+    return out
+
+
+def stiffness_matrix(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
+                     dense: bool = False, columns: np.ndarray | None = None) -> np.ndarray:
+    """K (N, N) = −∂loads/∂unknowns at (x, Q). Central differences of step 1e-6 of the
+    element length and 1e-6 rad: truncation ~1e-12 and round-off ~1e-10 of the loads' scale.
+    `dense` takes one column at a time (a check of the colouring); `columns` (indices) only
+    those columns, the others left zero."""
+    N = model.unknowns
+    K = np.empty((N, N))
+    n = Q.shape[2]
+    stride = n + 2 if dense else 2 * REACH + 1
+    wanted = np.ones(N, dtype=np.bool_)
+    if columns is not None:
+        wanted[:] = False
+        wanted[columns] = True
+    stiffness(np.ascontiguousarray(x), np.ascontiguousarray(Q), model.rod, model.ends,
+              model.incompressible, model.neo_hookean, model.now, model.free, model.block_of,
+              wanted, stride, 1e-6 * model.length_scale, 1e-6, K)
+    return K
+
+
+def masses(model: StaticModel, x: np.ndarray) -> np.ndarray:
+    """(N,) the inertia of each unknown as the kernel's kick applies it."""
+    rod = model.rod
+    n = rod.rest_length.shape[0]
+    r2 = model.now[k.T_RADIUS] ** 2
+    node = rod.node_mass[model.free[1]] * r2
+    e = np.linalg.norm(np.diff(x, axis=1), axis=0) / rod.rest_length
+    factor = e if (model.incompressible and not model.neo_hookean) else np.ones(n)
+    rotary = (rod.inertia * r2 * r2 / factor[None, :]).T.reshape(-1)
+    return np.concatenate([node, rotary])
+
+
+@dataclasses.dataclass(frozen=True)
+class Stability:
+    """What `stability` found for one state.
+
+    stable: no eigenvalue of M⁻¹K with a negative real part (or the symmetric test passed);
+    unstable_modes: how many have one; lowest: the smallest real part [1/s², ω²];
+    by: "symmetric part" (a Cholesky factorization proved it) or "eigenvalues";
+    mode: (n+1, 3) node displacement of the most unstable mode (largest row norm 1), None when
+    stable; mode_rotation: (n, 3) its frame rotations (material, rad per unit of mode).
+    """
+
+    stable: bool
+    unstable_modes: int
+    lowest: float
+    by: str
+    mode: np.ndarray | None = None
+    mode_rotation: np.ndarray | None = None
+
+
+def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
+              K: np.ndarray | None = None) -> Stability:
+    """Is the rest state (x, Q) stable? See the module docstring for what this proves.
+
+    An eigenvalue counts as negative below −1e-9 of the largest |λ| (the finite-difference
+    noise of K is ~1e-10 of its scale)."""
+    if K is None:
+        K = stiffness_matrix(model, x, Q)
+    scale = 1.0 / np.sqrt(masses(model, x))
+    A = K * scale[:, None] * scale[None, :]
+    try:
+        scipy.linalg.cholesky(0.5 * (A + A.T), lower=True, check_finite=False)
+        return Stability(True, 0, math.nan, "symmetric part")
+    except np.linalg.LinAlgError:
+        pass
+    values, vectors = scipy.linalg.eig(A, check_finite=False)
+    floor = -1e-9 * np.max(np.abs(values))
+    negative = np.flatnonzero(values.real < floor)
+    lowest = float(values.real.min())
+    if not len(negative):
+        return Stability(True, 0, lowest, "eigenvalues")
+    worst = int(np.argmin(values.real))
+    vector = (vectors[:, worst] * scale).real
+    if not np.any(vector):
+        vector = (vectors[:, worst] * scale).imag
+    n = Q.shape[2]
+    m = model.positions
+    mode = np.zeros((n + 1, 3))
+    mode[model.free[1], model.free[0]] = vector[:m]
+    rotation = vector[m:].reshape(n, 3)
+    size = np.linalg.norm(mode, axis=1).max()
+    if size > 0:
+        mode, rotation = mode / size, rotation / size
+    return Stability(False, int(len(negative)), lowest, "eigenvalues", mode, rotation)
+
+
+def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarray,
+              size: float) -> tuple[np.ndarray, np.ndarray]:
+    """(x, Q) moved by `size` along a mode of `stability` (mode (n+1, 3), rotation (n, 3)):
+    nodes by size·mode, frames by exp(−[size·rotation_i]×), as the kernel turns them."""
+    from scipy.spatial.transform import Rotation
+
+    turns = Rotation.from_rotvec(-size * np.asarray(rotation, float)).as_matrix()  # (n, 3, 3)
+    Q = np.ascontiguousarray(np.einsum("irs,sci->rci", turns, Q))
+    return np.ascontiguousarray(x + size * mode.T), Q
