@@ -125,7 +125,7 @@ def test_internal_loads_of_a_shipped_scene_match_the_twin():
     # the rod exactly as the builder makes it for a real config (twist_under_load, n = 12),
     # in a random deformed state
     problem = build(rodphase.load("twist_under_load", {"rod.elements": 12}))
-    _, _, state, rng = random_rod(0)
+    rng = np.random.default_rng(0)
     state = straight_state(problem.rod, twist_turns=1.0)
     state.x += 0.003 * rng.standard_normal(state.x.shape)
     state.v[:] = 0.1 * rng.standard_normal(state.v.shape)
