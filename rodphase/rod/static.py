@@ -352,3 +352,96 @@ def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarr
     turns = Rotation.from_rotvec(-size * np.asarray(rotation, float)).as_matrix()  # (n, 3, 3)
     Q = np.ascontiguousarray(np.einsum("irs,sci->rci", turns, Q))
     return np.ascontiguousarray(x + size * mode.T), Q
+
+
+@dataclasses.dataclass(frozen=True)
+class Solution:
+    """What `solve` found (it reports, it does not raise: a caller decides what a failed
+    Newton solve means, a fold or a jump).
+
+    x (3, n+1), Q (3, 3, n): the last iterate; success: the residual fell below the tolerance;
+    residual: its largest free nodal force or element torque per element length, over the
+    force scale; iterations: Newton steps taken; message: why it stopped.
+    """
+
+    x: np.ndarray
+    Q: np.ndarray
+    success: bool
+    residual: float
+    iterations: int
+    message: str
+
+
+def residual_norm(model: StaticModel, r: np.ndarray) -> float:
+    """The kernel's residual measure [N]: the largest free nodal force and element torque per
+    element length (as kernel._guards takes it), of the loads r (N,)."""
+    m = model.positions
+    n = (model.unknowns - m) // 3
+    force = np.zeros((3, n + 1))
+    force[model.free[0], model.free[1]] = r[:m]
+    torque = r[m:].reshape(n, 3)
+    return float(max(np.linalg.norm(force, axis=0).max(),
+                     (np.linalg.norm(torque, axis=1) / model.rod.rest_length).max()))
+
+
+def step_along(model: StaticModel, x: np.ndarray, Q: np.ndarray,
+               du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x, Q) moved by du (N,): the free position components by their entries, the frames
+    turned by their rotation vectors as the kernel turns them."""
+    m = model.positions
+    n = Q.shape[2]
+    mode = np.zeros((n + 1, 3))
+    mode[model.free[1], model.free[0]] = du[:m]
+    return displaced(x, Q, mode, du[m:].reshape(n, 3), 1.0)
+
+
+def solve(model: StaticModel, x: np.ndarray, Q: np.ndarray, *, force_scale: float,
+          tolerance: float = 1e-8, max_iterations: int = 50) -> Solution:
+    """Newton's method for the rest state nearest (x, Q): K·du = loads, banded LU in rod order
+    (an unknown reaches REACH blocks), with a backtracking line search on the residual
+    (halving up to 30 times). Converged when residual_norm < tolerance × force_scale."""
+    order = np.argsort(model.block_of, kind="stable")  # rod order: K is banded in it
+    blocks = model.block_of[order]
+    reach = np.searchsorted(blocks, blocks + REACH, side="right") - 1 - np.arange(len(order))
+    width = int(reach.max())
+    x, Q = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(Q, dtype=float)
+    r = loads(model, x, Q)
+    norm = residual_norm(model, r)
+    for iteration in range(max_iterations + 1):
+        if norm < tolerance * force_scale:
+            return Solution(x, Q, True, norm / force_scale, iteration, "converged")
+        if iteration == max_iterations:
+            break
+        K = stiffness_matrix(model, x, Q)[np.ix_(order, order)]
+        band = np.zeros((2 * width + 1, len(order)))
+        for d in range(-width, width + 1):  # ab[width + i - j, j] = K[i, j]
+            band[width - d, max(d, 0):len(order) + min(d, 0)] = np.diagonal(K, d)
+        try:
+            du_ordered = scipy.linalg.solve_banded((width, width), band, r[order],
+                                                   check_finite=False)
+        except (np.linalg.LinAlgError, ValueError) as error:
+            return Solution(x, Q, False, norm / force_scale, iteration,
+                            f"singular stiffness ({error}): a fold or a bifurcation")
+        du = np.empty_like(du_ordered)
+        du[order] = du_ordered
+        scale = 1.0
+        for _ in range(30):
+            x_try, Q_try = step_along(model, x, Q, scale * du)
+            r_try = loads(model, x_try, Q_try)
+            norm_try = residual_norm(model, r_try)
+            if np.isfinite(norm_try) and norm_try < norm:
+                break
+            scale *= 0.5
+        else:
+            m = model.positions
+            if (np.abs(du[:m]).max(initial=0.0) < 1e-12 * model.length_scale * len(du)
+                    and np.abs(du[m:]).max(initial=0.0) < 1e-12 * len(du)):
+                # the Newton step is round-off of the loads (E·A·1e-16 can exceed a small
+                # tolerance × a small load): the state is the solution to working precision
+                return Solution(x, Q, True, norm / force_scale, iteration,
+                                "converged to round-off (residual at the loads' round-off)")
+            return Solution(x, Q, False, norm / force_scale, iteration,
+                            "no step along the Newton direction lowers the residual")
+        x, Q, r, norm = x_try, Q_try, r_try, norm_try
+    return Solution(x, Q, False, norm / force_scale, max_iterations,
+                    f"not converged in {max_iterations} Newton steps")
