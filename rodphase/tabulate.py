@@ -45,12 +45,12 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
 _RUN_COLUMNS = ("status", "wall_time", "steps")
 
 
-def classify_table(store, **thresholds) -> pd.DataFrame:
-    """Classify every run of an open store: one row per run, run_id and what the
-    classification adds (the parameters, status and timings are the store's; see
-    Store.table). Nothing is written."""
+def classify_table(store, run_ids=None, **thresholds) -> pd.DataFrame:
+    """Classify every run of an open store (or those of `run_ids`): one row per run, run_id
+    and what the classification adds (the parameters, status and timings are the store's;
+    see Store.table). Nothing is written."""
     rows = []
-    for run_id in sorted(store.run_ids()):
+    for run_id in sorted(store.run_ids() if run_ids is None else run_ids):
         row = summarize(store.read_run(run_id), **thresholds)
         rows.append({"run_id": run_id} | {k: v for k, v in row.items() if k not in _RUN_COLUMNS})
     return pd.DataFrame(rows)
