@@ -346,6 +346,16 @@ class Store:
     def __enter__(self):
         return self
 
+    def __repr__(self) -> str:
+        if self.file is None and not self.writable:
+            return f"<rodphase Store {str(self._path)!r}: closed>"
+        mode = "open for writing" if self.writable else "read-only"
+        kind = self.attrs.get("kind", "?")
+        classified = self.file is not None and "classification" in self.file
+        return (f"<rodphase Store {str(self._path)!r} ({mode}): {kind}, "
+                f"{len(self.run_ids())} run(s), "
+                f"{'classified' if classified else 'not classified'}>")
+
     def __exit__(self, *exc) -> None:
         self.close()
 
