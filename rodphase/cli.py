@@ -274,7 +274,8 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     if csv_path:
         _make_parent(csv_path)
         write_table_csv(table, csv_path)
-        click.echo(f"table written to {csv_path}")
+        click.echo(f"table written to {csv_path} (units and meanings of its columns in "
+                   f"{csv_path}-metadata.json)")
 
 
 @main.command()

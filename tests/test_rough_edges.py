@@ -257,3 +257,38 @@ def test_history_as_a_dataframe_keeps_the_dict():
     assert isinstance(result.history, dict) and list(frame.columns) == list(result.history)
     np.testing.assert_array_equal(frame["end_force"], result.history["end_force"])
     assert frame.attrs["units"]["end_force"] == "N" and frame.attrs["units"]["link"] == "turns"
+
+
+# ---------------------------------------------------------------- self-describing tables
+
+def test_the_stored_classification_and_the_csv_describe_themselves(tmp_path):
+    import json
+
+    import h5py
+
+    path = tmp_path / "s.h5"
+    with writer(path) as store:
+        store.write_run("run-00000", {"twist_density": 0.4, "extension": 1.1}, straight_run(), {})
+        store.write_run("run-00001", {"twist_density": 0.8, "extension": 1.2},
+                        straight_run(status="not_converged"), {})
+    csv = tmp_path / "s.csv"
+    assert cli("classify", path, "--csv", csv).exit_code == 0
+    with h5py.File(path, "r") as f:
+        g = f["classification"]
+        # the sample's parameters and status stand beside its labels, every column has a unit
+        assert {"twist_density", "extension", "status", "phase", "link"} <= set(g)
+        assert list(g["status"].asstr()[()]) == ["ok", "not_converged"]
+        assert g["twist_density"][1] == 0.8
+        assert g["link"].attrs["units"] == "turns" and g["end_force"].attrs["units"] == "N"
+        assert "L/L0" in g["extension"].attrs["long_name"]
+        diagnostics = f["runs/run-00000"].attrs["diagnostics"]
+    assert "\n" in diagnostics and json.loads(diagnostics)["steps"] == 100  # readable text
+    table = st.read_table(path)  # the API's table is as before: no repeated columns
+    assert not [c for c in table.columns if c.endswith("_classified")]
+    assert table["status"].tolist() == ["ok", "not_converged"]
+    frame = pd.read_csv(csv)
+    assert {"twist_density", "extension", "status", "phase"} <= set(frame.columns)
+    meta = json.loads((tmp_path / "s.csv-metadata.json").read_text())
+    units = {c["name"]: c["unit"] for c in meta["tableSchema"]["columns"]}
+    assert list(units) == list(frame.columns)
+    assert units["wall_time"] == "s" and units["writhe"] == "turns"
