@@ -1144,7 +1144,12 @@ def case_plot_phase_while_written(lab: Lab) -> list[Outcome]:
     d, out, bg, problems = _running_sweep(lab, "plot-phase-while-written", None)
     if not problems:
         png = d / "phase.png"
-        res = lab.run(lab.cli("plot", out, "--kind", "phase", "-o", png), timeout=120)
+        deadline = time.monotonic() + 90
+        while True:  # "no finished runs yet" is right until the first run is stored
+            res = lab.run(lab.cli("plot", out, "--kind", "phase", "-o", png), timeout=120)
+            if "no finished runs yet" not in res.text or time.monotonic() > deadline:
+                break
+            time.sleep(1.0)
         p = output_problems(res, rc=0, one_error=False)
         if res.rc == 0 and not (png.exists() and png.stat().st_size):
             p.append("wrote no phase.png")
