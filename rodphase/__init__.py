@@ -18,3 +18,8 @@ def __getattr__(name):
 
         return getattr(api, name)
     raise AttributeError(f"module 'rodphase' has no attribute {name!r}")
+
+
+def __dir__():
+    # the lazily loaded names too: tab completion in a notebook offers rodphase.run
+    return sorted(set(globals()) | set(_API))

@@ -16,6 +16,9 @@ run's final state (see rodphase.restart).
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -71,29 +74,84 @@ def load_sweep(sweep, overrides=None, **settings) -> tuple[C.Frozen, C.Frozen]:
     return C.load_sweep(sweep, _overrides(overrides, settings), SCENES)
 
 
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def interactive() -> bool:
+    """Whether a person watches: a Python prompt, a Jupyter/IPython kernel, or a terminal."""
+    return (hasattr(sys, "ps1") or "ipykernel" in sys.modules
+            or bool(getattr(sys.stderr, "isatty", lambda: False)()))
+
+
+_warm = False
+# a kernel loaded from numba's disk cache is ready in about half a second; longer is a compile
+COMPILE_NOTICE_AFTER = 1.5  # s
+
+
+def _warm_kernel(say=_say) -> None:
+    """Compile the kernel (or load it from numba's cache) once per process, announcing it
+    when it takes long, as the CLI does: a first run on a new machine is otherwise silent for
+    about a minute."""
+    global _warm
+    if _warm:
+        return
+    from .runner import compile_kernel
+
+    timer = threading.Timer(COMPILE_NOTICE_AFTER, say, ["Compiling the kernel (once; numba "
+                                                        "caches it on disk) ..."])
+    timer.daemon = True
+    timer.start()
+    try:
+        seconds = compile_kernel()
+    finally:
+        timer.cancel()
+    if seconds > COMPILE_NOTICE_AFTER:
+        say(f"  ready in {seconds:.1f} s")
+    _warm = True
+
+
 def run(scene, overrides=None, **settings):
     """Simulate one scene (see `load` for the arguments) and return its RunResult. A run that
-    goes unstable or does not settle comes back with that status; it does not raise."""
-    from .runner import keep_snapshots, run_scene, snapshot_policy
+    goes unstable or does not settle comes back with that status; it does not raise. A run
+    whose snapshots (output.history_interval) would not fit in memory is refused first
+    (ConfigError). The first call compiles the kernel, and says so when that takes long."""
+    from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
 
     cfg = load(scene, overrides, **settings)
+    check_memory(cfg)
+    _warm_kernel()
     return keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
 
 
-def run_sweep(sweep, output, overrides=None, *, jobs: int = 2, backend: str = "loky",
-          scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
-          progress: bool = False, **settings):
+def run_sweep(sweep, output, overrides=None, *, jobs: int | None = None, backend: str = "loky",
+              scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
+              progress: bool | None = None, **settings):
     """Run a sweep into the store `output` (resuming it), classify it, and return its table
     (one row per run: parameters, status, phase, alignment, Lk/Tw/Wr, ...). Runs that failed
     are in the table with their status. A scene registered at run time (a builder added to
-    rodphase.scenes.SCENES in this session) is sent to the workers with the jobs."""
-    from .sweep import run_sweep
+    rodphase.scenes.SCENES in this session) is sent to the workers with the jobs.
+
+    jobs: parallel workers (default: this machine's cores). progress: a progress bar and the
+    CLI's messages on stderr (default: on in an interactive session, a notebook or a
+    terminal). replace=True replaces an `output` that holds another config's runs (once the
+    first new run is stored); without it such a store raises StoreMismatch."""
+    from .runner import check_jobs_memory
+    from .store import StoreMismatch
+    from .sweep import plan, run_sweep
 
     sweep_cfg, scene_cfg = load_sweep(sweep, overrides, **settings)
+    jobs = max(1, os.cpu_count() or 1) if jobs is None else int(jobs)
+    progress = interactive() if progress is None else bool(progress)
+    check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
     Path(output).parent.mkdir(parents=True, exist_ok=True)
-    report = run_sweep(sweep_cfg, scene_cfg, str(output), jobs=jobs, backend=backend,
-                       scheduler=scheduler, retry_failed=retry_failed, replace=replace,
-                       progress=progress, echo=lambda _: None)
+    try:
+        report = run_sweep(sweep_cfg, scene_cfg, str(output), jobs=jobs, backend=backend,
+                           scheduler=scheduler, retry_failed=retry_failed, replace=replace,
+                           progress=progress, echo=_say if progress else lambda _: None)
+    except StoreMismatch as exc:
+        # the store speaks the CLI's words; from Python the switch is a keyword
+        raise type(exc)(str(exc).replace("--force", "replace=True")) from None
     if report.stopped_by:
         raise KeyboardInterrupt(f"stopped by {report.stopped_by}; call again to go on")
     return classify_file(output)

@@ -37,7 +37,9 @@ def reports_errors(func):
                        "run the same command to go on.", err=True)
             sys.exit(2)
         except (C.ConfigError, StoreError, FileNotFoundError, KeyError) as exc:
-            click.echo(f"error: {exc}", err=True)
+            # str(KeyError) quotes its message: print the message itself
+            text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+            click.echo(f"error: {text}", err=True)
             sys.exit(2)
 
     return wrapper
@@ -54,6 +56,26 @@ def _make_parent(output: str) -> None:
 
 def _overrides(items) -> list:
     return [C.parse_override(item) for item in items]
+
+
+def _has_runs(store, store_file) -> list[str]:
+    """The store's run ids; a store without any is refused in one line."""
+    ids = store.run_ids()
+    if not ids:
+        raise C.ConfigError(str(store_file), "no finished runs yet",
+                            "a store with at least one run (a sweep killed before its first "
+                            "run has none; run the same sweep command again)")
+    return ids
+
+
+def _check_run(store, store_file, run_id: str) -> str:
+    """`run_id` if the store holds it, else the one-line error that lists what it holds."""
+    ids = _has_runs(store, store_file)
+    if run_id not in ids:
+        shown = ", ".join(ids) if len(ids) <= 6 else f"{', '.join(ids[:3])}, ..., {ids[-1]}"
+        raise C.ConfigError("--run", run_id, f"a run id of {store_file} ({len(ids)} stored: "
+                            f"{shown})")
+    return run_id
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -92,10 +114,11 @@ def run(scene, output, sets, force):
     from .scenes import SCENES
 
     cfg = C.load_scene(scene, _overrides(sets), SCENES)
-    from .runner import keep_snapshots, run_scene, snapshot_policy
+    from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
     from .tabulate import classify_store
 
+    check_memory(cfg)  # a run whose snapshots cannot fit is refused before it costs anything
     _make_parent(output)
     # the output is opened (locked, its config checked) before simulating: a run that cannot
     # be written is refused before it costs anything
@@ -128,7 +151,29 @@ def run(scene, output, sets, force):
         if key in row:
             parts.append(f"{key} {row[key]:.3f}")
     click.echo(", ".join(parts))
+    escapes = _escapes_line(result)
+    if escapes:
+        click.echo(escapes)
     sys.exit(0 if result.ok else 1)
+
+
+def _escapes_line(result) -> str:
+    """'link -4.365 of -6.366 turns put in: +2.00 turns in 5 escapes (...)', or "" for a run
+    that lost no link: the link alone does not say that some of it left the rod."""
+    import numpy as np
+
+    from .result import rotation_put_in
+
+    h = result.history
+    if "link_escapes" not in h or not len(h["link_escapes"]) or not h["link_escapes"][-1]:
+        return ""
+    turns = float(rotation_put_in(h)[-1] / (2 * np.pi))
+    link = float(h["link"][-1])
+    count = int(h["link_escapes"][-1])
+    when = [n for n in result.diagnostics.get("notes", []) if n.startswith("link left")]
+    detail = when[0][when[0].find("(ΔLk") :] if when and "(ΔLk" in when[0] else ""
+    return (f"link {link:.3f} of {turns:.3f} turns put in: {link - turns:+.2f} turns in "
+            f"{count} escape(s) past the ends {detail}").rstrip()
 
 
 @main.command()
@@ -158,10 +203,12 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
       rodphase sweep fig3_paper -o fig3.h5 --set sweep.samples=400 --set rod.elements=120
       rodphase sweep fig3_paper -o fig3.h5 --backend dask --scheduler tcp://head:8786
     """
+    from .runner import check_jobs_memory
     from .scenes import SCENES
-    from .sweep import run_sweep
+    from .sweep import plan, run_sweep
 
     sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
+    check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
     _make_parent(output)
     report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
                        scheduler=scheduler, retry_failed=retry_failed, replace=force,
@@ -216,10 +263,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
         # a sweep is still writing it: classify what has finished, but leave the file to it
         store, busy = read_store(store_file), exc
     with store:
-        if not store.run_ids():
-            raise C.ConfigError(store_file, "no finished runs yet",
-                                "a store with at least one run (a sweep killed before its "
-                                "first run has none; run the same sweep command again)")
+        _has_runs(store, store_file)
         table = (store.table(classify_table(store, **thresholds)) if busy else
                  classify_store(store, **thresholds))
     if busy:
@@ -230,7 +274,8 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     if csv_path:
         _make_parent(csv_path)
         write_table_csv(table, csv_path)
-        click.echo(f"table written to {csv_path}")
+        click.echo(f"table written to {csv_path} (units and meanings of its columns in "
+                   f"{csv_path}-metadata.json)")
 
 
 @main.command()
@@ -242,8 +287,12 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
               "displacement; response: ΔU, ΔWr, ΔTw vs a modulus or radius ramp; shape: "
               "final rod shapes; hat: extension and torque vs turns (scene hat_curve); path: "
               "each run's protocol as a line through the (L/L0, Φa) plane, marked by phase.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file.")
-@click.option("--run", "run_id", default=None, help="Run id for topology/force (default: first).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Figure file; its suffix picks the format: .png, .pdf, .svg (any that "
+              "matplotlib writes).")
+@click.option("--run", "run_id", default=None,
+              help="Run id for topology/force/response/hat/shape/path (default: the first; "
+              "see `rodphase classify`).")
 @click.option("--experiments", type=click.Path(exists=True, dir_okay=False),
               help="CSV of experimental points (twist_density, extension, kind) to overlay.")
 @click.option("--twist", type=click.Choice(["rest", "current"]), default="rest", show_default=True,
@@ -276,10 +325,34 @@ def plot(store_file, kind, output, run_id, experiments, twist, background, size,
                                 "(e.g. 3.4,3)") from None
     try:
         _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption)
+    except C.ConfigError:
+        raise  # already names what was given and what is allowed
     except ValueError as exc:
         # a figure that this file's data cannot make (say why, no traceback)
         raise C.ConfigError(f"--kind {kind}", store_file, str(exc)) from None
     click.echo(f"written {output}")
+
+
+def _classified_table(store, ids: list[str]):
+    """The store's table with a phase for every run: the runs that the stored classification
+    lacks (a store not classified yet, or still being written by a sweep) are classified
+    here with the default thresholds, for this figure only (the file is not changed)."""
+    import pandas as pd
+
+    from .tabulate import classify_table
+
+    stored = store.classification()
+    have = set() if stored is None else set(stored["run_id"].astype(str)) & set(ids)
+    missing = [rid for rid in ids if rid not in have]
+    if not missing:
+        return store.table()
+    fresh = classify_table(store, run_ids=missing)
+    kept = None if stored is None else stored[stored["run_id"].astype(str).isin(have)]
+    both = fresh if kept is None or kept.empty else pd.concat([kept, fresh], ignore_index=True)
+    click.echo(f"note: {len(missing)} of {len(ids)} runs classified for this figure only (not "
+               "stored; `rodphase classify` stores them once no sweep writes the file)",
+               err=True)
+    return store.table(both)
 
 
 def _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption):
@@ -289,10 +362,11 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
     from .store import read_store
 
     with read_store(store_file) as store:
+        ids = _has_runs(store, store_file)
+        if run_id is not None:
+            _check_run(store, store_file, run_id)
         if kind == "phase":
-            table = store.table()
-            if "phase" not in table:
-                raise C.ConfigError(store_file, "not classified", "run `rodphase classify` first")
+            table = _classified_table(store, ids)
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
@@ -302,7 +376,7 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
         elif kind == "path":
             from .tabulate import path_table
 
-            ids = [run_id] if run_id else store.run_ids()[:6]
+            ids = [run_id] if run_id else ids[:6]
             paths = {}
             for rid in ids:
                 result = store.read_run(rid)
@@ -311,9 +385,7 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             behind = None
             if background:
                 with read_store(background) as other:
-                    behind = other.table()
-                if "phase" not in behind:
-                    raise C.ConfigError(background, "not classified", "run `rodphase classify` first")
+                    behind = _classified_table(other, _has_runs(other, background))
             P.phase_path(paths, output, background=behind)
         elif kind == "shape":
             table = store.table()
@@ -325,7 +397,7 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                                result.positions, result.rest_radius))
             P.shape_grid(shapes, output)
         else:
-            rid = run_id or store.run_ids()[0]
+            rid = run_id or ids[0]
             result = store.read_run(rid)
             params = P.params_text(store.run_params(rid))
             if kind == "topology":
@@ -366,7 +438,7 @@ def movie(store_file, run_id, output, fps, height):
                             "installed (apt install ffmpeg, conda install ffmpeg)")
     _make_parent(output)
     with read_store(store_file) as store:
-        result = store.read_run(run_id)
+        result = store.read_run(_check_run(store, store_file, run_id))
     from .analysis import twist_density
 
     h = result.history
@@ -398,7 +470,7 @@ def export(store_file, run_id, output, snapshots):
 
     _make_parent(output)
     with read_store(store_file) as store:
-        result = store.read_run(run_id)
+        result = store.read_run(_check_run(store, store_file, run_id))
     if snapshots:
         written = write_vtk_series(output, result.snapshot_positions, result.radii)
         click.echo(f"written {len(written)} files {written[0]} ... {written[-1]}"
@@ -442,17 +514,36 @@ def scenes():
       rodphase scenes
       rodphase config fig2b_solenoid    # one of them, resolved
     """
+    import shutil
+    import textwrap
+
     import yaml
 
     root = C.PACKAGE_CONFIGS
+    width = max(shutil.get_terminal_size((100, 24)).columns, 60)
     for path in sorted((root / "scenes").glob("*.yaml")) + sorted(root.glob("*.yaml")):
         data = yaml.safe_load(path.read_text()) or {}
         text = data.get("description") or (data.get("sweep") or {}).get("description", "")
         if not text:
-            first = next((ln[1:].strip() for ln in path.read_text().splitlines()
-                          if ln.startswith("#")), "")
-            text = first
-        click.echo(f"{str(path.relative_to(root)):40s} {text}")
+            text = _first_sentence(path.read_text())
+        name = f"{str(path.relative_to(root)):40s} "
+        # wrapped, not cut: a sweep's description is the first sentence of its comment
+        click.echo(textwrap.fill(text, width=width - 1, initial_indent=name,
+                                 subsequent_indent=" " * len(name)) if text else name.rstrip())
+
+
+def _first_sentence(yaml_text: str) -> str:
+    """The first sentence of a YAML file's leading comment block (its lines joined)."""
+    import re
+
+    lines = []
+    for line in yaml_text.splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line[1:].strip())
+    block = " ".join(part for part in lines if part)
+    found = re.match(r"(.+?[.!?])(\s|$)", block)
+    return found.group(1) if found else block
 
 
 if __name__ == "__main__":

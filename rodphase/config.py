@@ -631,7 +631,8 @@ def resolve_scene_path(name: str, base: Path | None = None) -> Path:
         if c.is_file():
             return c
     shipped = sorted(p.stem for p in (PACKAGE_CONFIGS / "scenes").glob("*.yaml"))
-    raise ConfigError("scene", name, "a YAML file path or a shipped scene: " + ", ".join(shipped))
+    raise ConfigError("scene", name, "a YAML file path or a shipped scene: " + ", ".join(shipped)
+                      + _did_you_mean(name, shipped))
 
 
 def load_scene(path: str | Path, overrides=(), registered=None) -> Frozen:
@@ -661,7 +662,13 @@ def resolve_sweep_path(name: str | Path) -> Path:
         return shipped
     names = sorted(p.stem for p in PACKAGE_CONFIGS.glob("*.yaml"))
     raise ConfigError("sweep file", str(name), "a YAML file path or a shipped sweep: "
-                      + ", ".join(names))
+                      + ", ".join(names) + _did_you_mean(stem, names))
+
+
+def _did_you_mean(name: str, known) -> str:
+    stem = Path(str(name)).name.removesuffix(".yaml")
+    close = difflib.get_close_matches(stem, list(known), n=1)
+    return f"; did you mean '{close[0]}'?" if close else ""
 
 
 def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen, Frozen]:

@@ -452,6 +452,18 @@ def hat_curve(result: RunResult, path=None, *, title: str | None = None,
     labels = [s["label"] for s in d.get("stages", [])]
     stage = np.asarray(h["stage"])
     colours = [BLACK, BLUE, VERMILLION, "0.5"]
+    def spread(values: np.ndarray) -> float:
+        return float(np.ptp(values)) if len(values) else 0.0
+
+    drawn = [k for k, label in enumerate(labels) if label != "load"
+             and spread(turns[stage == k]) > 0.0]
+    if not drawn:
+        # a run that is not turned under its load (a sweep's sample started on the straight
+        # branch holds only) would give empty axes: say so instead
+        raise ValueError(
+            "a run whose end is turned under a constant load, as scene hat_curve does (this "
+            f"run's stages {', '.join(labels) or '(none)'} turn it by "
+            f"{spread(turns):.3g} turns): rodphase run hat_curve -o hat.h5")
 
     with matplotlib.rc_context(STYLE):
         if axes is None:

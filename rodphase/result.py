@@ -89,6 +89,37 @@ class RunResult:
         return self.status == "ok"
 
     @property
+    def history_frame(self):
+        """The history as a pandas DataFrame, one row per sampled time, one column per
+        quantity (a copy; `history` stays the dict of arrays). Units: `.attrs["units"]`."""
+        import pandas as pd
+
+        frame = pd.DataFrame({name: np.asarray(column) for name, column in self.history.items()})
+        frame.attrs["units"] = {name: history_unit(name) for name in frame.columns}
+        return frame
+
+    def __repr__(self) -> str:
+        # the default dataclass repr prints every array (85 734 characters for 60 elements)
+        rows = len(self.history.get("time", ()))
+        parts = [f"status={self.status!r}", f"elements={len(self.rest_lengths)}",
+                 f"history={rows} rows × {len(self.history)} columns",
+                 f"snapshots={len(self.snapshot_positions)}"]
+        if rows:
+            parts.append(f"t_end={float(self.history['time'][-1]):.4g} s")
+            parts.append(f"turns={float(rotation_put_in(self.history)[-1]) / (2 * np.pi):.4g}")
+            for key in ("link", "twist", "writhe"):
+                if key in self.history and len(self.history[key]):
+                    parts.append(f"{key}={float(self.history[key][-1]):.4g}")
+            if "link_escapes" in self.history and self.history["link_escapes"][-1]:
+                parts.append(f"link_escapes={int(self.history['link_escapes'][-1])}")
+        wall = self.diagnostics.get("wall_time")
+        if wall is not None:
+            parts.append(f"wall_time={float(wall):.3g} s")
+        message = self.message if len(self.message) <= 80 else self.message[:77] + "..."
+        parts.append(f"message={message!r}")
+        return f"RunResult({', '.join(parts)})"
+
+    @property
     def snapshot_history_rows(self) -> np.ndarray:
         """(K,) the history row each snapshot was taken at."""
         if self.snapshot_rows is not None:

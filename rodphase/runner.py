@@ -7,6 +7,7 @@ the same result for the same config; the engine (rodphase.rod) knows nothing of 
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import numpy as np
@@ -379,3 +380,94 @@ def compile_kernel() -> float:
             helper.kill()
             helper.wait()
     return time.perf_counter() - start
+
+
+# Peak memory of a run over the bytes of its snapshots (positions and d1, float64): the
+# kernel's chunks and their concatenation, the topology of every snapshot (tangents, the
+# closure, Tw and Wr working arrays), the thinned copies and the store's write. Measured:
+# twist_under_load at 20 elements with a snapshot every step (150 657 snapshots, 148 MB)
+# peaked 1324 MB above the same run's peak with history_interval 0.05 s, a factor of 8.9.
+PEAK_OVER_SNAPSHOTS = 10.0
+
+
+def available_memory() -> float:
+    """Bytes this process can still allocate: the least of the memory the system has
+    available (/proc/meminfo MemAvailable), the room under the address-space limit (ulimit
+    -v) and the room under the cgroup's memory limit; inf where none of these is known."""
+    import resource
+    from pathlib import Path
+
+    room = [math.inf]
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                room.append(float(line.split()[1]) * 1024)
+    except OSError:
+        pass
+    try:
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            size = 0.0
+            for line in Path("/proc/self/status").read_text().splitlines():
+                if line.startswith("VmSize:"):
+                    size = float(line.split()[1]) * 1024
+            room.append(max(soft - size, 0.0))
+    except (OSError, ValueError):
+        pass
+    for limit, used in (("memory.max", "memory.current"),
+                        ("memory/memory.limit_in_bytes", "memory/memory.usage_in_bytes")):
+        try:
+            cap = Path("/sys/fs/cgroup", limit).read_text().strip()
+            if cap != "max" and float(cap) < 2**60:
+                room.append(max(float(cap) - float(Path("/sys/fs/cgroup", used).read_text()),
+                                0.0))
+                break
+        except (OSError, ValueError):
+            continue
+    return min(room)
+
+
+def snapshot_estimate(cfg, twist_targets: list[float] | None = None) -> tuple[float, int, float]:
+    """(snapshots, nodes, seconds of protocol) a run of `cfg` may take at most: one snapshot
+    per history row, every stage (a hold too) run to its full duration at the smaller time
+    step (contact awake), at the scene's elements (a run refined by solver.refine_up_to
+    takes more; it is rare, and counting it always would refuse sweeps that fit)."""
+    from .rod.simulate import time_step
+    from .scenes import build
+
+    extra = {} if twist_targets is None else {"twist_targets": twist_targets}
+    problem = build(cfg, **extra)
+    dt, _ = time_step(problem)
+    every = max(1, int(round(cfg.output.history_interval / dt)))
+    rows = sum(math.ceil(s.duration / dt) for s in problem.stages) / every
+    return rows, problem.rod.elements + 1, sum(s.duration for s in problem.stages)
+
+
+def check_memory(cfg, *, twist_targets: list[float] | None = None, share: int = 1,
+                 where: str = "") -> None:
+    """Refuse (ConfigError on output.history_interval) a run whose snapshots would not fit in
+    memory, before anything is simulated or any store made: its work would be lost at its
+    end. `share`: runs that are in memory at once (the sweep's workers)."""
+    rows, nodes, seconds = snapshot_estimate(cfg, twist_targets)
+    snapshot_bytes = rows * (2 * nodes - 1) * 3 * 8  # positions (nodes) and d1 (elements)
+    peak = PEAK_OVER_SNAPSHOTS * snapshot_bytes
+    room = available_memory() / max(int(share), 1)
+    if peak <= room:
+        return
+    interval = cfg.output.history_interval
+    least = interval * peak / room
+    shared = f" per worker ({share} at once)" if share > 1 else ""
+    raise C.ConfigError(
+        f"{where}output.history_interval", interval,
+        f"at least {least:.3g} s: {interval:g} s asks for up to {rows:.3g} snapshots × {nodes} "
+        f"nodes × 48 bytes = {snapshot_bytes / 2**20:.0f} MiB over {seconds:.4g} s of "
+        f"protocol, about {peak / 2**20:.0f} MiB at the run's peak, and "
+        f"{room / 2**20:.0f} MiB are available{shared}")
+
+
+def check_jobs_memory(jobs, workers: int) -> None:
+    """check_memory for every job of a sweep (rodphase.sweep.plan), `workers` of them in
+    memory at once; the error names the first sample that would not fit."""
+    for job in jobs:
+        check_memory(job.scene, twist_targets=job.twist_targets, share=workers,
+                     where=f"{job.run_ids[0]}: ")

@@ -346,6 +346,16 @@ class Store:
     def __enter__(self):
         return self
 
+    def __repr__(self) -> str:
+        if self.file is None and not self.writable:
+            return f"<rodphase Store {str(self._path)!r}: closed>"
+        mode = "open for writing" if self.writable else "read-only"
+        kind = self.attrs.get("kind", "?")
+        classified = self.file is not None and "classification" in self.file
+        return (f"<rodphase Store {str(self._path)!r} ({mode}): {kind}, "
+                f"{len(self.run_ids())} run(s), "
+                f"{'classified' if classified else 'not classified'}>")
+
     def __exit__(self, *exc) -> None:
         self.close()
 
@@ -492,7 +502,9 @@ class Store:
         returns, the run survives a kill of this process."""
         self._need_writer()
         _check_id(run_id)
-        diagnostics = json.dumps(result.diagnostics, default=_json_default)  # fail before writing
+        # indented: h5dump, HDFView and h5py show it as readable text (json.loads reads both)
+        diagnostics = json.dumps(result.diagnostics, default=_json_default, indent=1,
+                                 sort_keys=True)  # fail before writing
         folder = parts_folder(self._path)
         try:
             folder.mkdir(exist_ok=True)
@@ -541,7 +553,9 @@ class Store:
                 if replaced and "classification" in f:
                     # a classification describes the runs it saw: rows of replaced runs go
                     table = _read_classification(f["classification"])
-                    _write_classification(f, table[~table["run_id"].astype(str).isin(replaced)])
+                    units = _classification_units(f["classification"])
+                    _write_classification(f, table[~table["run_id"].astype(str).isin(replaced)],
+                                          units)
         except BaseException:
             self._refresh()
             raise
@@ -606,13 +620,15 @@ class Store:
 
     # --- tables ---------------------------------------------------------------------------
 
-    def write_classification(self, df: pd.DataFrame) -> None:
+    def write_classification(self, df: pd.DataFrame,
+                             units: dict[str, tuple[str, str]] | None = None) -> None:
         """Store a per-run table (must have a run_id column), replacing any earlier one.
 
         One 1-D dataset per column under /classification, in column order (also listed in
         its "columns" attribute). Numbers and booleans keep their dtype (pandas nullable
         integers become float with NaN); everything else is stored as UTF-8 strings, with
-        missing values as "".
+        missing values as "". `units`: column → (unit, meaning), stored as the dataset's
+        attributes `units` and `long_name`.
         """
         if "run_id" not in df.columns:
             raise ValueError(f"classification table needs a run_id column; it has "
@@ -621,7 +637,7 @@ class Store:
         self.merge()  # runs and the table that describes them in one file
         try:
             with self._rewritten(2 * int(df.memory_usage(deep=True).sum()) + (1 << 18)) as f:
-                _write_classification(f, df)
+                _write_classification(f, df, units or {})
         finally:
             self._refresh()
 
@@ -756,7 +772,7 @@ def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,
     _name_dimensions(g)
 
 
-def _write_classification(f: h5py.File, df: pd.DataFrame) -> None:
+def _write_classification(f: h5py.File, df: pd.DataFrame, units: dict) -> None:
     if "classification" in f:
         del f["classification"]
     g = f.create_group("classification", track_order=True)
@@ -765,7 +781,18 @@ def _write_classification(f: h5py.File, df: pd.DataFrame) -> None:
     for name in df.columns:
         if name != "run_id":
             g.create_dataset(str(name), data=_column_array(df[name])).dims[0].attach_scale(key)
+        if str(name) in units:
+            unit, meaning = units[str(name)]
+            g[str(name)].attrs["units"] = unit
+            if meaning:
+                g[str(name)].attrs["long_name"] = meaning
     g.attrs["columns"] = [str(c) for c in df.columns]
+
+
+def _classification_units(g: h5py.Group) -> dict[str, tuple[str, str]]:
+    """column → (unit, meaning) of a stored classification (those that have a unit)."""
+    return {name: (_plain(ds.attrs["units"]), _plain(ds.attrs.get("long_name", "")))
+            for name, ds in g.items() if "units" in ds.attrs}
 
 
 def _read_classification(g: h5py.Group) -> pd.DataFrame:
@@ -960,6 +987,18 @@ def write_table_csv(table, path) -> Path:
     """Write a per-run table (a DataFrame, or the path of a store) as CSV; return the path."""
     if not isinstance(table, pd.DataFrame):
         table = read_table(table)
+    from .tabulate import column_units
+
     path = Path(path)
     table.to_csv(path, index=False, float_format="%.10g")
+    # the CSV itself stays plain (pd.read_csv reads it as before); its columns' units and
+    # meanings go beside it, as CSV on the Web (W3C) metadata: PATH-metadata.json
+    described = column_units(table.columns)
+    metadata = {"@context": "http://www.w3.org/ns/csvw", "url": path.name,
+                "tableSchema": {"columns": [
+                    {"name": name, "titles": name, "dc:description": meaning,
+                     "unit": unit or None} for name, (unit, meaning) in described.items()],
+                    "primaryKey": "run_id"}}
+    Path(f"{path}-metadata.json").write_text(json.dumps(metadata, indent=1,
+                                                        ensure_ascii=False) + "\n")
     return path

@@ -45,21 +45,61 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
 _RUN_COLUMNS = ("status", "wall_time", "steps")
 
 
-def classify_table(store, **thresholds) -> pd.DataFrame:
-    """Classify every run of an open store: one row per run, run_id and what the
-    classification adds (the parameters, status and timings are the store's; see
-    Store.table). Nothing is written."""
+def classify_table(store, run_ids=None, **thresholds) -> pd.DataFrame:
+    """Classify every run of an open store (or those of `run_ids`): one row per run, run_id
+    and what the classification adds (the parameters, status and timings are the store's;
+    see Store.table). Nothing is written."""
     rows = []
-    for run_id in sorted(store.run_ids()):
+    for run_id in sorted(store.run_ids() if run_ids is None else run_ids):
         row = summarize(store.read_run(run_id), **thresholds)
         rows.append({"run_id": run_id} | {k: v for k, v in row.items() if k not in _RUN_COLUMNS})
     return pd.DataFrame(rows)
 
 
+# (unit, meaning) of every column a table of rodphase can have: the classification group's
+# datasets carry them as attributes, and the CSV's metadata file lists them ("1":
+# dimensionless, a count or an index; "": text)
+COLUMNS = {
+    "run_id": ("", "the run's name, key into /runs"),
+    "status": ("", "ok, unstable, not_converged or error (see the README)"),
+    "message": ("", "what ended the run, and what to change if it failed"),
+    "wall_time": ("s", "wall-clock time of the run"),
+    "steps": ("1", "time steps taken"),
+    "elements": ("1", "elements of the run that gave the shape (more if refined)"),
+    "twist_density": ("1", "sampled twist density, the paper's Phi*a = theta*a0/L0"),
+    "twist_density_current": ("1", "sampled Phi*a of the stretched straight rod"),
+    "extension": ("1", "sampled extension L/L0 (set by the load of the incompressible rod)"),
+    "force_multiple": ("F_C", "sampled load in multiples of F_C = pi^2 E I / L0^2"),
+    "alignment": ("1", "loop alignment in [-1, 1]; NaN: no element has a contact partner"),
+    "phase": ("", "straight, plectoneme, solenoid, mixed, or failed (no shape)"),
+    "end_rotation_turns": ("turns", "final end rotation"),
+    "phi_a_rest": ("1", "final Phi*a = theta*a0/L0 of the turns the clamps put in"),
+    "phi_a_current": ("1", "final Phi*a of the stretched straight rod (rest value / e^1.5)"),
+    "final_extension": ("1", "final L/L0 of the end"),
+    "end_force": ("N", "final axial end force"),
+    "link": ("turns", "final Lk"),
+    "twist": ("turns", "final Tw"),
+    "writhe": ("turns", "final Wr"),
+}
+
+
+def column_units(columns) -> dict[str, tuple[str, str]]:
+    """(unit, meaning) of each of `columns`; a column rodphase does not know is "unknown"."""
+    return {str(c): COLUMNS.get(str(c), ("unknown", "")) for c in columns}
+
+
 def classify_store(store, **thresholds) -> pd.DataFrame:
     """Classify every run of a store open for writing, store the classification in it and
-    return the store's whole table (parameters, status, timings and the classification)."""
-    store.write_classification(classify_table(store, **thresholds))
+    return the store's whole table (parameters, status, timings and the classification).
+
+    The stored classification describes itself: each run's sampled parameters and status
+    stand beside its labels, and every column carries its unit (attribute `units`)."""
+    labels = classify_table(store, **thresholds)
+    runs = store.table(labels.iloc[0:0])  # parameters and status, without the labels
+    keep = ["run_id"] + [c for c in runs.columns
+                         if c not in labels.columns and c not in ("message", "wall_time", "steps")]
+    described = runs[keep].merge(labels, on="run_id", how="right")
+    store.write_classification(described, units=column_units(described.columns))
     return store.table()
 
 

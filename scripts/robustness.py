@@ -992,10 +992,10 @@ def case_reader_during_sweep(lab: Lab) -> list[Outcome]:
 # ---------------------------------------------------------------- 7. bad input
 
 def _bad_input(lab: Lab, case: str, cmd_args: list, names: tuple, out: Path | None,
-               forbid=("Launching", "Running")) -> list[Outcome]:
+               forbid=("Launching", "Running"), raw: bool = False) -> list[Outcome]:
     o = Outcome(case)
     start = time.monotonic()
-    res = lab.run(lab.cli(*cmd_args), timeout=60)
+    res = lab.run([str(a) for a in cmd_args] if raw else lab.cli(*cmd_args), timeout=60)
     problems = output_problems(res, rc=2, error_names=names, within=BAD_INPUT_DEADLINE,
                                forbid=forbid)
     if out is not None and out.exists():
@@ -1063,6 +1063,141 @@ def case_force_same_config(lab: Lab) -> list[Outcome]:
     o.add(problems)
     o.seconds = time.monotonic() - start
     return [o]
+
+
+def case_snapshots_cannot_fit(lab: Lab) -> list[Outcome]:
+    """A snapshot every step under a 2 GiB address-space limit (issue 30: the run ran to
+    its end, then died with ArrayMemoryError): refused before it starts, one line naming
+    output.history_interval, nothing written."""
+    d = lab.fresh("snapshots-cannot-fit")
+    out = d / "out.h5"
+    cmd = lab.cli("run", "twist_under_load", "-o", out, "--set", "rod.elements=20",
+                  "--set", "loading.twist_density=-1", "--set", "output.history_interval=1e-7")
+    rows = _bad_input(lab, "snapshots-cannot-fit", ["sh", "-c", "ulimit -v 2097152; exec \"$@\"",
+                                                    "sh", *cmd],
+                      ("output.history_interval",), None, raw=True)
+    if out.exists() or list(d.iterdir()):
+        rows[0].failures.append(f"left {sorted(p.name for p in d.iterdir())}")
+        rows[0].right = 0
+    return rows
+
+
+def _empty_store(lab: Lab, path: Path) -> None:
+    """A store as a sweep killed before its first run leaves it (made with the store API)."""
+    code = ("import sys; from rodphase import store as st; "
+            "st.open_store(sys.argv[1], config_text='sweep: {}\\n', config_hash='h', "
+            "version='0', kind='sweep').close()")
+    res = lab.run([lab.python, "-c", code, str(path)], timeout=120)
+    if res.rc != 0:
+        raise RuntimeError(f"could not make an empty store: {res.text[-800:]}")
+
+
+def case_plot_empty_store(lab: Lab) -> list[Outcome]:
+    """Every plot kind and classify of a store with no run: one error line each, exit 2."""
+    d = lab.fresh("plot-empty-store")
+    store = d / "empty.h5"
+    _empty_store(lab, store)
+    o = Outcome("plot-empty-store")
+    start = time.monotonic()
+    for kind in ("phase", "topology", "force", "shape", "hat", "path"):
+        png = d / f"{kind}.png"
+        res = lab.run(lab.cli("plot", store, "--kind", kind, "-o", png), timeout=120)
+        problems = output_problems(res, rc=2, error_names=("empty.h5",))
+        if png.exists():
+            problems.append(f"wrote {png.name}")
+        o.add(problems, kind)
+    res = lab.run(lab.cli("classify", store), timeout=120)
+    o.add(output_problems(res, rc=2, error_names=("empty.h5",)), "classify")
+    o.seconds = time.monotonic() - start
+    return [o]
+
+
+def case_plot_hat_of_sweep(lab: Lab) -> list[Outcome]:
+    """plot --kind hat of a sweep's store whose runs start on the straight branch and only
+    hold (as the demo's do: loading.quasi_static_below) says so in one line instead of
+    writing an empty figure with exit 0."""
+    d = lab.fresh("plot-hat-of-sweep")
+    cfg = d / "held.yaml"
+    cfg.write_text(_yaml({"sweep": {
+        "scene": "twist_under_load", "set": dict(FAST, **{"loading.quasi_static_below": 1.0}),
+        "axes": {"twist_density": [0.05, 0.1], "extension": [1.05, 1.2]},
+        "sampler": "random", "samples": 2, "seed": SEED}}))
+    base = d / "held.h5"
+    res = lab.run(lab.sweep_cmd(cfg, base), timeout=600)
+    if res.rc != 0:
+        raise RuntimeError(f"the held sweep failed (exit {res.rc}): {res.text[-1500:]}")
+    png = d / "hat.png"
+    rows = _bad_input(lab, "plot-hat-of-sweep", ["plot", base, "--kind", "hat", "-o", png],
+                      ("--kind hat",), None)
+    if png.exists():
+        rows[0].failures.append("wrote hat.png")
+        rows[0].right = 0
+    return rows
+
+
+def case_plot_phase_while_written(lab: Lab) -> list[Outcome]:
+    """While a sweep writes OUT, plot --kind phase draws the runs finished so far (exit 0, a
+    figure) and classify prints them with one note saying why the table is not stored."""
+    ref = lab.reference()
+    o = Outcome("plot-phase-while-written")
+    start = time.monotonic()
+    d, out, bg, problems = _running_sweep(lab, "plot-phase-while-written", None)
+    if not problems:
+        png = d / "phase.png"
+        deadline = time.monotonic() + 90
+        while True:  # "no finished runs yet" is right until the first run is stored
+            res = lab.run(lab.cli("plot", out, "--kind", "phase", "-o", png), timeout=120)
+            if "no finished runs yet" not in res.text or time.monotonic() > deadline:
+                break
+            time.sleep(1.0)
+        p = output_problems(res, rc=0, one_error=False)
+        if res.rc == 0 and not (png.exists() and png.stat().st_size):
+            p.append("wrote no phase.png")
+        problems += [f"plot: {x}" for x in p]
+        res = lab.run(lab.cli("classify", out), timeout=120)
+        p = output_problems(res, rc=0, one_error=False)
+        if not re.search(r"^\d+ runs: ", res.out, re.M):
+            p.append("printed no table summary")
+        if len([ln for ln in res.text.splitlines() if ln.startswith("note:")]) != 1:
+            p.append("no single note saying why the table is not stored")
+        problems += [f"classify: {x}" for x in p]
+        if bg.proc.poll() is not None:
+            problems.append("inconclusive: the sweep ended before the readers did")
+        problems += _finish_first(lab, bg, out, ref)
+    else:
+        bg.cleanup()
+        bg.result()
+    o.add(problems)
+    o.seconds = time.monotonic() - start
+    return [o]
+
+
+def case_unknown_run_id(lab: Lab) -> list[Outcome]:
+    """plot --run of an id the store lacks: one line naming it and the ids stored, without
+    the stray quotes of a printed KeyError."""
+    base = lab.classified_base()
+    d = lab.fresh("unknown-run-id")
+    o = Outcome("unknown-run-id")
+    start = time.monotonic()
+    res = lab.run(lab.cli("plot", base, "--kind", "topology", "--run", "run-99999", "-o",
+                          d / "x.png"), timeout=60)
+    problems = output_problems(res, rc=2, error_names=("run-00000",), within=BAD_INPUT_DEADLINE)
+    errors = res.error_lines()
+    if errors and not errors[0].startswith("error: --run: 'run-99999'"):
+        problems.append(f"the line does not start with the option and the id: {errors[0][:120]}")
+    o.add(problems)
+    o.seconds = time.monotonic() - start
+    return [o]
+
+
+def case_misspelt_scene(lab: Lab) -> list[Outcome]:
+    out = lab.fresh("misspelt-scene") / "out.h5"
+    rows = _bad_input(lab, "misspelt-scene", ["run", "twist_under_lod", "-o", out],
+                      ("did you mean 'twist_under_load'",), None)
+    if out.exists():
+        rows[0].failures.append("made out.h5")
+        rows[0].right = 0
+    return rows
 
 
 # ---------------------------------------------------------------- stores from strangers
@@ -1193,6 +1328,12 @@ def cases(kills: int = 60, repeats: int = 1, memory_samples: int = MEMORY_SAMPLE
         **{case_id: (lambda c: lambda lab: case_sweep_bad_input(lab, c))(case_id)
            for case_id in SWEEP_BAD_INPUT},
         "run-unwritable-output": case_run_unwritable,
+        "snapshots-cannot-fit": case_snapshots_cannot_fit,
+        "plot-empty-store": case_plot_empty_store,
+        "plot-hat-of-sweep": case_plot_hat_of_sweep,
+        "plot-phase-while-written": case_plot_phase_while_written,
+        "unknown-run-id": case_unknown_run_id,
+        "misspelt-scene": case_misspelt_scene,
         "force-same-config-keeps-runs": case_force_same_config,
     }
     for kind in CRAFTED:

@@ -10,7 +10,9 @@ Rows: kill -9 of the writer at random pwrite64 calls (strace; chains of kills re
 the same output, then the same command completes bit-identical to an uninterrupted sweep);
 SIGINT/SIGTERM/SIGKILL of the parent; a worker killed mid-run; a full disk (1 MiB tmpfs);
 a second writer (with and without HDF5 file locking) and readers of a running sweep; bad
-input that must stop before anything is simulated; stores crafted by someone else.
+input that must stop before anything is simulated; stores crafted by someone else; issue
+30's cases (snapshots that cannot fit, plots of empty, live and sweep stores, an unknown run
+id, a misspelt scene).
 
 Needs Linux (/proc), strace (the kill row) and root for mount (the disk-full row); a row
 that cannot run here is skipped with the reason. About 3-4 minutes on 2 cores.
