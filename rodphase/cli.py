@@ -306,8 +306,13 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
                    "(7 in), or width,height in inches.")
 @click.option("--caption/--no-caption", default=True, show_default=True,
               help="Phase map: a line under it with the sweep's parameters and run counts.")
+@click.option("--theory/--no-theory", default=True, show_default=True,
+              help="Phase map: the straight rod's buckling twist along L/L0, the model's own "
+                   "(from its stiffness, at the sweep's resolution) and the unsheared clamped "
+                   "Greenhill twist (for a rod clamped at both ends under an end load).")
 @reports_errors
-def plot(store_file, kind, output, run_id, experiments, twist, background, size, caption):
+def plot(store_file, kind, output, run_id, experiments, twist, background, size, caption,
+         theory):
     """Draw a figure from OUT.h5.
 
     \b
@@ -324,7 +329,8 @@ def plot(store_file, kind, output, run_id, experiments, twist, background, size,
             raise C.ConfigError("--size", size, "column, page, or width,height in inches "
                                 "(e.g. 3.4,3)") from None
     try:
-        _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption)
+        _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption,
+              theory)
     except C.ConfigError:
         raise  # already names what was given and what is allowed
     except ValueError as exc:
@@ -355,7 +361,8 @@ def _classified_table(store, ids: list[str]):
     return store.table(both)
 
 
-def _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption):
+def _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption,
+          theory=True):
     import pandas as pd
 
     from . import plot as P
@@ -370,9 +377,16 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
-            text = (P.sweep_caption(C.stored_config(store.attrs.get("config_yaml", "")), table)
-                    if caption else None)
-            P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size)
+            config = C.stored_config(store.attrs.get("config_yaml", ""))
+            text = P.sweep_caption(config, table) if caption else None
+            lines = None
+            if theory and "extension" in table and table["extension"].notna().any():
+                from .tabulate import onset_lines
+
+                e = table["extension"].astype(float)
+                lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12 for i in range(13)])
+            P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
+                        onset=lines)
         elif kind == "path":
             from .tabulate import path_table
 

@@ -152,7 +152,8 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
 
 def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | None = None,
               title: str | None = None, twist: str = "twist_density", caption: str | None = None,
-              size: tuple[float, float] | str | None = None, ax=None) -> Figure:
+              size: tuple[float, float] | str | None = None, ax=None,
+              onset: pd.DataFrame | None = None) -> Figure:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
     x = extension L/L0 ("extension"), y = twist density Φa (column `twist`: "twist_density",
@@ -166,7 +167,9 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
     Into a given `ax` the legend goes inside the axes (a figure legend would sit over the
     caller's other panels) and the colour bar takes its room from `ax`. `caption` is a line
     under the figure (the sweep's parameters); `size` is (width, height) in inches or
-    "column" / "page" (a journal's single column, full width).
+    "column" / "page" (a journal's single column, full width). `onset` (tabulate.onset_lines)
+    draws the straight rod's buckling twist: the model's own (solid) and the unsheared
+    clamped Greenhill twist (dashed), on the same twist axis.
     """
     if "extension" not in table.columns:
         raise ValueError(f"phase_map needs the column 'extension'; the table has "
@@ -223,6 +226,14 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                                   label=f"failed ({int((~ok).sum())})"))
         if experiments is not None and len(experiments):
             handles += _experiments(ax, experiments)
+        if onset is not None and len(onset):
+            reading = "current" if twist == "phi_a_current" else "rest"
+            n = onset.attrs.get("elements")
+            for column, style, label in (
+                    ("model", "-", "onset, model" + (f" n = {n}" if n else "")),
+                    ("greenhill", "--", "Greenhill, unsheared")):
+                handles += ax.plot(onset["extension"], onset[f"{column}_{reading}"], style,
+                                   color="0.15", lw=1.0, zorder=1, label=label)
 
         ax.set_ylabel(TWIST_DENSITY_LABEL if twist != "phi_a_current" else
                       r"twist density $\Phi a$ of the stretched rod (rad)")
@@ -239,7 +250,8 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                     va="bottom", fontsize=end_size)
         if handles and own:
             fig.legend(handles=handles, loc="outside upper center",
-                       ncols=min(len(handles), 2 if small else 4), frameon=False,
+                       ncols=min(len(handles), 2 if small else (3 if len(handles) > 6 else 4)),
+                       frameon=False,
                        handletextpad=0.3, columnspacing=1.2)
         elif handles:
             ax.legend(handles=handles, frameon=False, fontsize=7, handletextpad=0.3)

@@ -127,3 +127,47 @@ def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
     if "writhe" in h:
         table["writhe"] = h["writhe"][rows]
     return table
+
+
+def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
+    """The straight rod's buckling twist along `extensions` (L/L0) for the scene of a store's
+    resolved config (its `scene` section): the model's own onset (rod/onset.py: the perfect
+    discrete rod at the scene's resolution, with its shear and stretch) and the unsheared
+    clamped Greenhill twist, each as the rest Φa = θ·a0/L0 (`model_rest`, `greenhill_rest`)
+    and as the stretched rod's (`model_current`, `greenhill_current`). None for a scene whose
+    rod is not clamped at both ends under an end load, or whose resolved config is not there
+    (the onset is for that rod only)."""
+    from .rod.model import Rod
+    from .rod.onset import greenhill_turns, straight_onset_turns
+
+    scene = config.get("scene") if isinstance(config.get("scene"), dict) else config
+    try:
+        rod_cfg, material, ends = scene["rod"], scene["material"], scene["ends"]
+        loaded = (ends["start"] == "clamped" and ends["end_axial"] == "force"
+                  and ends["end_lateral"] == "held" and ends["end_rotation"] == "held")
+        shear = material.get("shear_modulus")
+        rod = Rod(length=float(rod_cfg["length"]), radius=float(rod_cfg["radius"]),
+                  elements=int(rod_cfg["elements"]),
+                  youngs_modulus=float(material["youngs_modulus"]),
+                  shear_modulus=None if shear in (None, "auto") else float(shear),
+                  incompressible=bool(material.get("incompressible", True)),
+                  law=material.get("law", "paper"),
+                  bend_stiffness_given=material.get("bend_stiffness"),
+                  twist_stiffness_given=material.get("twist_stiffness"),
+                  shear_stiffness_given=material.get("shear_stiffness"),
+                  axial_stiffness_given=material.get("axial_stiffness"))
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not loaded or not rod.incompressible or rod.law != "paper":
+        return None
+    e = np.asarray(extensions, dtype=float)
+    model = np.array([straight_onset_turns(rod, v, tolerance=1e-4) for v in e])
+    greenhill = np.array([greenhill_turns(rod, v) for v in e])
+    to_phi = units.TURN * rod.radius / rod.length  # turns -> rest Φa
+    lines = pd.DataFrame({
+        "extension": e,
+        "model_rest": model * to_phi, "greenhill_rest": greenhill * to_phi,
+        "model_current": units.current_twist_density(model * to_phi, e),
+        "greenhill_current": units.current_twist_density(greenhill * to_phi, e)})
+    lines.attrs["elements"] = rod.elements
+    return lines

@@ -62,6 +62,18 @@ def straight_rod_buckling_turns(force: float, youngs_modulus: float, shear_modul
     and rest length `length`, stretched by `force` [N] and clamped at both ends, buckles by
     the clamped Greenhill criterion (the paper's law: B = E·I0/e², G·J = G·J0/e² at
     L = e·L0): θ_c = M_c·e·L0/(G·J0/e²) = M_c·e³·L0/(G·J0), in turns θ_c/2π."""
-    e, moment, _ = stretched_rod_buckling_moments(force, youngs_modulus, radius, length)
-    polar = 2.0 * units.second_moment_of_area(radius)
-    return moment * e**3 * length / (shear_modulus * polar) / units.TURN
+    e = units.extension_under_load(youngs_modulus, radius, force)
+    second = units.second_moment_of_area(radius)
+    return stretched_greenhill_turns(force, e, length, youngs_modulus * second,
+                                     shear_modulus * 2.0 * second)
+
+
+def stretched_greenhill_turns(tension: float, extension: float, length: float, bending: float,
+                              twist: float) -> float:
+    """The clamped Greenhill twist [turns] of a rod of rest length `length`, rest bending and
+    twist stiffnesses `bending`, `twist` [N m²], stretched to `extension` e by `tension` [N]
+    with the paper's incompressible thinning (B/e², C/e² at length e·L0), unshearable:
+    θ_c = M_c(T, e·L0, B/e²)·e·L0/(C/e²)."""
+    e = extension
+    moment = greenhill_clamped_moment(tension, e * length, bending / e**2)
+    return moment * e * length / (twist / e**2) / units.TURN

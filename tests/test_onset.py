@@ -9,6 +9,7 @@ and for the symmetries it must have.
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from rodphase.rod import kernel as k
@@ -168,3 +169,28 @@ def test_a_hold_just_past_the_onset_does_not_end_on_the_unstable_straight_rod():
     below, report = _hold_near_the_onset(0.98, static_stability=True)
     assert (report["static_tests"], report["static_unstable"]) == (1, 0)
     assert abs(below.history["writhe"][-1]) < 0.01
+
+
+def test_the_phase_maps_onset_lines_are_the_models_and_greenhills():
+    # the lines `rodphase plot --kind phase` draws, from a store's resolved scene config: the
+    # model's onset at the scene's resolution, and Greenhill above it (shear), in rest Φa
+    from rodphase import config as C
+    from rodphase import plot as P
+    from rodphase.scenes import SCENES
+    from rodphase.tabulate import onset_lines
+
+    scene = C.load_scene("twist_under_load", [("rod.elements", 40)], SCENES).plain()
+    lines = onset_lines({"scene": scene}, [1.05, 1.15])
+    turns = onset.straight_onset_turns(paper_rod(40), 1.15, tolerance=1e-4)
+    assert lines["model_rest"].iloc[1] == pytest.approx(turns * 2 * math.pi * A0 / L0, rel=2e-4)
+    assert (lines["greenhill_rest"] > lines["model_rest"]).all()
+    assert lines["model_current"].iloc[1] == pytest.approx(lines["model_rest"].iloc[1] / 1.15**1.5)
+    # a rod not clamped at both ends under a load has no such line
+    free = {**scene, "ends": {**scene["ends"], "end_rotation": "free"}}
+    assert onset_lines({"scene": free}, [1.1]) is None
+    table = pd.DataFrame({"extension": [1.05, 1.15], "twist_density": [0.5, 2.0],
+                          "phase": ["straight", "solenoid"], "alignment": [np.nan, 1.0],
+                          "status": ["ok", "ok"]})
+    figure = P.phase_map(table, onset=lines)
+    drawn = [line.get_label() for line in figure.axes[0].get_lines()]
+    assert drawn == ["onset, model n = 40", "Greenhill, unsheared"]

@@ -147,7 +147,7 @@ class StraightBranch:
         factorization costs a twentieth of an eigenvalue; the stiffness dominates)."""
         # bracketed around the unsheared clamped Greenhill twist: the model's onset lies at
         # 0.85-0.97 of it for the paper's rod (shear), and the bracket widens for any other
-        guess = _greenhill_guess(self.rod, self.extension)
+        guess = greenhill_turns(self.rod, self.extension)
         lo, hi = 0.7 * guess, 1.05 * guess
         while not self.stable(lo):
             lo, hi = 0.5 * lo, lo
@@ -176,15 +176,11 @@ def _perfect(rod: Rod) -> Rod:
     return dataclasses.replace(rod, rest_curvature=(0.0, 0.0, 0.0))
 
 
-def _greenhill_guess(rod: Rod, extension: float) -> float:
-    """The unsheared clamped Greenhill twist of the rod stretched to `extension`, in turns:
-    M_c·L/(C/e²) with the current length e·L0, B/e² and the tension of the paper's law."""
-    from ..theory import greenhill_clamped_moment
+def greenhill_turns(rod: Rod, extension: float) -> float:
+    """The unsheared clamped Greenhill twist [turns] of the rod stretched to `extension` under
+    the paper's law (theory.stretched_greenhill_turns)."""
+    from ..theory import stretched_greenhill_turns
 
-    e = extension
-    bending = rod.bending_stiffness / e**2
-    twist = rod.twist_stiffness / e**2
-    tension = rod.axial_stiffness * (1.0 - 1.0 / e)
-    moment = greenhill_clamped_moment(tension, e * rod.length, bending)
-    return moment * e * rod.length / twist / TURN
-
+    tension = rod.axial_stiffness * (1.0 - 1.0 / extension)
+    return stretched_greenhill_turns(tension, extension, rod.length, rod.bending_stiffness,
+                                     rod.twist_stiffness)
