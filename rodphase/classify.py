@@ -13,7 +13,7 @@ import numpy as np
 
 from .analysis import partner_signs, partners
 
-__all__ = ["PHASES", "alignment", "phase", "phase_code"]
+__all__ = ["PHASES", "UNSEEN_COIL_WRITHE", "alignment", "phase", "phase_code", "unseen_coil"]
 
 #: Phase names; their index is the integer code used for storage.
 PHASES = ("straight", "plectoneme", "solenoid", "mixed")
@@ -63,6 +63,19 @@ def phase(alignment, plectoneme_below=-0.5, solenoid_above=0.5) -> str:
     if value > hi:
         return "solenoid"
     return "mixed"
+
+
+#: |Wr| [turns] above which a shape the classifier calls straight is a coil it cannot see
+UNSEEN_COIL_WRITHE = 0.5
+
+
+def unseen_coil(phase_name: str, writhe: float) -> bool:
+    """A final shape labelled straight that writhes by more than UNSEEN_COIL_WRITHE turns: the
+    paper's classifier looks for partners at least 5 radii away along the rod, and a solenoid
+    whose turns are shorter than that (the tightest coils, above L/L0 ≈ 1.165 at Fig 3's
+    loads, docs/reproduction.md) has none, so it reads as straight. A straight rod writhes by
+    ~0 (its frozen imperfection: < 1e-3 turns); half a turn is a loop."""
+    return phase_name == "straight" and math.isfinite(writhe) and abs(writhe) > UNSEEN_COIL_WRITHE
 
 
 def phase_code(name) -> int:

@@ -224,6 +224,13 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                        s=18, c="black", linewidths=0.9, zorder=3)
             handles.append(Line2D([], [], ls="", marker="x", ms=5, color="black",
                                   label=f"failed ({int((~ok).sum())})"))
+        if "unseen_coil" in table and table["unseen_coil"].fillna(False).astype(bool).any():
+            blind = table["unseen_coil"].fillna(False).astype(bool)
+            ax.scatter(table.loc[blind, "extension"], table.loc[blind, "twist_density"],
+                       marker="o", s=90 if not small else 50, facecolors="none",
+                       edgecolors="crimson", linewidths=1.2, zorder=3)
+            handles.append(Line2D([], [], ls="", marker="o", ms=8, mfc="none", mec="crimson",
+                                  label=f"straight, |Wr| > 0.5 ({int(blind.sum())})"))
         if experiments is not None and len(experiments):
             handles += _experiments(ax, experiments)
         if onset is not None and len(onset):

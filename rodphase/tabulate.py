@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 
 from . import units
-from .classify import alignment, phase
+from .classify import alignment, phase, unseen_coil
 from .result import rotation_put_in
 
 
@@ -38,6 +38,7 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
     for key in ("link", "twist", "writhe"):
         if key in h:
             row[key] = float(h[key][-1])
+    row["unseen_coil"] = unseen_coil(row["phase"], row.get("writhe", np.nan))
     return row
 
 
@@ -80,6 +81,8 @@ COLUMNS = {
     "link": ("turns", "final Lk"),
     "twist": ("turns", "final Tw"),
     "writhe": ("turns", "final Wr"),
+    "unseen_coil": ("", "labelled straight but |Wr| > 0.5 turn: a coil too tight for the "
+                    "classifier's 5-radii partner separation (classify.unseen_coil)"),
 }
 
 

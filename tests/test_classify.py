@@ -218,3 +218,26 @@ def test_phase_codes():
 def test_alignment_validation(args, kwargs, match):
     with pytest.raises(ValueError, match=match):
         alignment(*args, **kwargs)
+
+
+def test_a_coil_tighter_than_the_partner_separation_is_flagged_not_hidden():
+    # A solenoid of loop radius 0.6a and pitch 2.05a (turns touching): each turn is 4.3a of
+    # arc, shorter than the classifier's 5a partner separation, so neighbouring turns are
+    # never partners and the two-turns-apart ones are 4.1a away (beyond 2.2a): alignment NaN,
+    # "straight". Its writhe is several turns (an open helix of 6 turns, measured 3.10), so
+    # the table flags it; a straight rod (Wr 0) and a real solenoid are not flagged.
+    from rodphase.classify import unseen_coil
+    from rodphase.topology import writhe
+
+    coil = resample(chain(line((0.0, 0.0, -10 * A), (0.6 * A, 0.0, 0.0)),
+                          helix((0.0, 0.0), 0.6 * A, GAP, 6),
+                          line(helix((0.0, 0.0), 0.6 * A, GAP, 6)[-1], (0.0, 0.0, 6 * GAP + 10 * A))),
+                    0.2 * A)
+    value = alignment(coil, A)
+    assert math.isnan(value) and phase(value) == "straight"
+    turns = writhe(coil)
+    assert abs(turns) > 2.0
+    assert unseen_coil("straight", turns)
+    assert not unseen_coil("straight", 0.0)
+    assert not unseen_coil("solenoid", turns)
+    assert not unseen_coil("straight", float("nan"))
