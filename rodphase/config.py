@@ -470,13 +470,16 @@ def _check_scene_consistency(cfg: dict) -> None:
 
 def shear_modulus(cfg) -> float:
     g = cfg["material"].shear_modulus
-    return 2.0 * cfg["material"].youngs_modulus / 3.0 if g == "auto" else g
+    return units.paper_shear_modulus(cfg["material"].youngs_modulus) if g == "auto" else g
 
 
 def buckling_force(cfg) -> float:
-    """F_C of the scene's rod [N]."""
-    rod = cfg["rod"]
-    return units.critical_force(cfg["material"].youngs_modulus, rod.radius, rod.length)
+    """F_C = π² B / L0² of the scene's rod [N], B its material.bend_stiffness if given, else
+    E·I0 (as Rod.buckling_force)."""
+    rod, material = cfg["rod"], cfg["material"]
+    if material.bend_stiffness is not None:
+        return units.buckling_force(material.bend_stiffness, rod.length)
+    return units.critical_force(material.youngs_modulus, rod.radius, rod.length)
 
 
 def load_force(cfg) -> float | None:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("ok", "unstable", "not_converged")
+STATUSES = ("ok", "unstable", "not_converged", "error")
 
 # The history: one row per sampled time, one column per quantity, in the order the kernel
 # writes them (rod/kernel.py derives its slot indices H_* from this table). (name, unit, meaning)

@@ -30,9 +30,23 @@ def second_moment_of_area(radius: float) -> float:
     return math.pi * radius**4 / 4.0
 
 
+def buckling_force(bending_stiffness: float, length: float) -> float:
+    """F_C = π² B / L0² [N], the unit of the paper's loads (the Euler load of a pinned rod),
+    for a bending stiffness B [N m²]: the one definition (Rod.buckling_force and the config's
+    force_multiple both use it)."""
+    return math.pi**2 * bending_stiffness / length**2
+
+
 def critical_force(youngs_modulus: float, radius: float, length: float) -> float:
-    """F_C = π² E I0 / L0² [N], the unit of the paper's loads."""
+    """F_C = π² E I0 / L0² [N] of a solid circular rod (buckling_force with B = E·π·a0⁴/4,
+    its product kept in this order: the shipped loads are bit-identical to before)."""
     return math.pi**2 * youngs_modulus * math.pi * radius**4 / 4.0 / length**2
+
+
+def paper_shear_modulus(youngs_modulus: float) -> float:
+    """G = 2E/3 [Pa], as the paper states it: E/(1 + ν) with ν = ½, twice the textbook
+    E/(2(1 + ν)) of an incompressible solid. The one place it is written."""
+    return 2.0 * youngs_modulus / 3.0
 
 
 def load_for_extension(youngs_modulus: float, radius: float, extension: float,

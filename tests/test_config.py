@@ -443,25 +443,25 @@ def test_every_command_has_an_example_in_its_help():
 # C.HASH_NEUTRAL and leave these unchanged; a change here means every user's store written
 # before it can no longer be resumed.
 SHIPPED_HASHES = {
-    "fig3_adaptive.yaml": "e1203f4a05bd6225",
-    "fig3_continuation.yaml": "84c85ca9b078a195",
-    "fig3_grid.yaml": "b85caaaf96a2424e",
-    "fig3_paper.yaml": "c31a8579b212ccfc",
-    "fig3_paper_adaptive.yaml": "589cf0da07ec5786",
-    "fig3_paper_reference.yaml": "a603d1d53de4101c",
-    "fig3_stretched.yaml": "79f90b85fae2e95e",
-    "hat_forces.yaml": "e80d8ddd078757a9",
-    "quick.yaml": "993506a6f29e7e75",
-    "scenes/active_agent.yaml": "960a406d20b6870b",
-    "scenes/fig2a_plectoneme.yaml": "767b034b93fb8a9e",
-    "scenes/fig2b_solenoid.yaml": "eb30ae4ee82cfee5",
-    "scenes/figS3_escape.yaml": "fddd9828d6ff37da",
-    "scenes/hat_curve.yaml": "76ed76ed5be12bf2",
-    "scenes/helical_buckling.yaml": "daaf407a7aa38735",
-    "scenes/muscle.yaml": "cee164392ae36944",
-    "scenes/solenoid_loss.yaml": "20a2073b65584fe6",
-    "scenes/stiffening.yaml": "e231548394f45689",
-    "scenes/twist_under_load.yaml": "8d0af598de879a32",
+    "fig3_adaptive.yaml": "af7fe29c10597950",
+    "fig3_continuation.yaml": "f980e28046de1fca",
+    "fig3_grid.yaml": "e527df74d68f0b73",
+    "fig3_paper.yaml": "908960b002f6e978",
+    "fig3_paper_adaptive.yaml": "93b6a9d29c903704",
+    "fig3_paper_reference.yaml": "d9ec290df1ccc600",
+    "fig3_stretched.yaml": "3f57bc2f5fbe2af2",
+    "hat_forces.yaml": "65ce94d00c6e86e8",
+    "quick.yaml": "0eefb4140349af18",
+    "scenes/active_agent.yaml": "2c6a23fb08c4a298",
+    "scenes/fig2a_plectoneme.yaml": "d157a215205e63c7",
+    "scenes/fig2b_solenoid.yaml": "4fc4cd2e22fc19fe",
+    "scenes/figS3_escape.yaml": "3a555994f35cc5d5",
+    "scenes/hat_curve.yaml": "8015402f4ed8e193",
+    "scenes/helical_buckling.yaml": "fb8765b925dc3d83",
+    "scenes/muscle.yaml": "d4d4b873aa60ed86",
+    "scenes/solenoid_loss.yaml": "cd2fd237e07b16b8",
+    "scenes/stiffening.yaml": "39940b5426528e03",
+    "scenes/twist_under_load.yaml": "f3c36c55aa151a04",
 }
 
 
@@ -484,7 +484,29 @@ def test_fold_contact_off_gives_the_hashes_from_before_it():
     for name, expected in before.items():
         cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("contact.fold", False),
                                                       ("contact.sleep", False),
-                                                      ("solver.refine_from", "start")], SCENES)
+                                                      ("solver.refine_from", "start"),
+                                                      ("solver.static_stability", False)], SCENES)
+        assert C.config_hash(cfg) == expected, name
+
+
+# the scenes' pins before solver.static_stability (issue #32): with it off they hash as before
+BEFORE_STATIC_STABILITY = {
+    "scenes/active_agent.yaml": "960a406d20b6870b",
+    "scenes/fig2a_plectoneme.yaml": "767b034b93fb8a9e",
+    "scenes/fig2b_solenoid.yaml": "eb30ae4ee82cfee5",
+    "scenes/figS3_escape.yaml": "fddd9828d6ff37da",
+    "scenes/hat_curve.yaml": "76ed76ed5be12bf2",
+    "scenes/helical_buckling.yaml": "daaf407a7aa38735",
+    "scenes/muscle.yaml": "cee164392ae36944",
+    "scenes/solenoid_loss.yaml": "20a2073b65584fe6",
+    "scenes/stiffening.yaml": "e231548394f45689",
+    "scenes/twist_under_load.yaml": "8d0af598de879a32",
+}
+
+
+def test_static_stability_off_gives_the_hashes_from_before_it():
+    for name, expected in BEFORE_STATIC_STABILITY.items():
+        cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("solver.static_stability", False)], SCENES)
         assert C.config_hash(cfg) == expected, name
 
 
@@ -494,7 +516,8 @@ def test_this_sessions_keys_at_their_old_behaviour_give_the_hashes_from_before_t
               "scenes/twist_under_load.yaml": "91ca00c16beb833f"}
     for name, expected in before.items():
         cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("contact.sleep", False),
-                                                      ("solver.refine_from", "start")], SCENES)
+                                                      ("solver.refine_from", "start"),
+                                                      ("solver.static_stability", False)], SCENES)
         assert C.config_hash(cfg) == expected, name
 
 

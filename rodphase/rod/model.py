@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..units import buckling_force, paper_shear_modulus
+
 Table = tuple[tuple[float, ...], tuple[float, ...]]  # (times [s], values): piecewise linear
 
 # The incompressible laws: "paper" is Gazzola 2018's (force /e, couple /ε³: not the gradient
@@ -82,7 +84,7 @@ class Rod:
         if self.law == "neo_hookean" and not self.incompressible:
             raise ValueError("the neo-Hookean law is incompressible: it needs incompressible=True")
         if self.shear_modulus is None:
-            object.__setattr__(self, "shear_modulus", 2.0 * self.youngs_modulus / 3.0)
+            object.__setattr__(self, "shear_modulus", paper_shear_modulus(self.youngs_modulus))
 
     @property
     def area(self) -> float:
@@ -126,8 +128,8 @@ class Rod:
 
     @property
     def buckling_force(self) -> float:
-        """F_C = π² E I / L0², the paper's unit of load."""
-        return math.pi**2 * self.bending_stiffness / self.length**2
+        """F_C = π² B / L0², the paper's unit of load (units.buckling_force)."""
+        return buckling_force(self.bending_stiffness, self.length)
 
     @property
     def element_length(self) -> float:
