@@ -384,7 +384,9 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                 from .tabulate import onset_lines
 
                 e = table["extension"].astype(float)
-                lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12 for i in range(13)])
+                # 41 points: the line is concave, and a coarse polyline would cut below it
+                lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 40
+                                             for i in range(41)])
             P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
                         onset=lines)
         elif kind == "path":

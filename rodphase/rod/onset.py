@@ -86,10 +86,8 @@ class StraightBranch:
         n = (model.unknowns - m) // 3
         keep = np.concatenate([np.flatnonzero(model.free[0] != along),
                                m + 3 * np.arange(n), m + 3 * np.arange(n) + 1])
-        self.lateral = keep[np.argsort(model.block_of[keep], kind="stable")]
-        blocks = model.block_of[self.lateral]
-        self.width = int(np.max(np.searchsorted(blocks, blocks + static.REACH, side="right")
-                                - 1 - np.arange(len(blocks))))
+        order, self.width = static.rod_order(model.block_of[keep])
+        self.lateral = keep[order]
 
     def problem(self, turns: float) -> Problem:
         """The straight equilibrium at `turns` under the end force of `extension` untwisted."""
@@ -122,10 +120,7 @@ class StraightBranch:
         K = static.stiffness_matrix(model, state.x, state.Q, columns=self.lateral)
         s = 1.0 / np.sqrt(static.masses(model, state.x)[self.lateral])
         A = K[np.ix_(self.lateral, self.lateral)] * s[:, None] * s[None, :]
-        band = np.zeros((self.width + 1, len(self.lateral)))
-        for d in range(self.width + 1):
-            band[self.width - d, d:] = 0.5 * (np.diagonal(A, d) + np.diagonal(A, -d))
-        return band
+        return static.symmetric_band(A, self.width)
 
     def stable(self, turns: float) -> bool:
         """The lateral block's symmetric part is positive definite: its banded Cholesky

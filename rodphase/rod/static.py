@@ -26,11 +26,14 @@ What the stability test can and cannot prove (`stability`):
   eigenvalue of M⁻¹K has a positive real part: the state is stable against divergence. That
   is sufficient, not necessary: on the twisted straight rod an axial–twist coupling makes the
   whole symmetric part indefinite from ~0.7 of the onset on, where the rod is still stable.
-- Otherwise the eigenvalues of M⁻¹K decide: a real part below zero is a growing mode. This
-  is exact for divergence, which is how a twisted rod loses stability (its critical pair of
-  helical modes crosses zero together, so det K does not change sign: count eigenvalues,
-  never read a determinant). It does not see flutter (a complex pair whose damped growth
-  the kernel's damping could allow): none is known in these scenes.
+- Otherwise the eigenvalues of M⁻¹K decide: a real part below zero is a growing mode. The six
+  nearest zero come first (shift-invert Arnoldi on a sparse LU: milliseconds), since near
+  zero is where a mode crosses as a control moves slowly, which is how a twisted rod loses
+  stability (its critical pair of helical modes crosses zero together, so det K does not
+  change sign: count eigenvalues, never read a determinant); if none of them grows, all the
+  eigenvalues are computed (dense: 0.1 s at 478 unknowns, seconds at 958), since a state
+  far past an onset has its growing modes far from zero. It does not see flutter (a complex
+  pair whose damped growth the kernel's damping could allow): none is known in these scenes.
 - It says nothing about states in self-contact (the static model has no contact) and is
   local: a stable state can still be left by a finite push (the subcritical snap of a
   solenoid).
@@ -288,12 +291,32 @@ def masses(model: StaticModel, x: np.ndarray) -> np.ndarray:
     return np.concatenate([node, rotary])
 
 
+def rod_order(block_of: np.ndarray) -> tuple[np.ndarray, int]:
+    """(order, width): the unknowns sorted by block (rod order, in which the stiffness is
+    banded: an unknown reaches REACH blocks) and the half bandwidth that follows."""
+    order = np.argsort(block_of, kind="stable")
+    blocks = block_of[order]
+    reach = np.searchsorted(blocks, blocks + REACH, side="right") - 1 - np.arange(len(order))
+    return order, int(reach.max())
+
+
+def symmetric_band(A: np.ndarray, width: int) -> np.ndarray:
+    """The symmetric part of A (in rod order) in LAPACK's upper banded storage
+    ((width + 1, N): row width − d holds diagonal d), for cholesky_banded and eig_banded."""
+    band = np.zeros((width + 1, A.shape[0]))
+    for d in range(width + 1):
+        band[width - d, d:] = 0.5 * (np.diagonal(A, d) + np.diagonal(A, -d))
+    return band
+
+
 @dataclasses.dataclass(frozen=True)
 class Stability:
     """What `stability` found for one state.
 
     stable: no eigenvalue of M⁻¹K with a negative real part (or the symmetric test passed);
-    unstable_modes: how many have one; lowest: the smallest real part [1/s², ω²];
+    unstable_modes: how many have one, among the NEAR_ZERO nearest zero when one of those
+    does (a lower bound then), else among all; lowest: the smallest real part among those
+    looked at [1/s², ω²];
     by: "symmetric part" (a Cholesky factorization proved it) or "eigenvalues";
     mode: (n+1, 3) node displacement of the most unstable mode (largest row norm 1), None when
     stable; mode_rotation: (n, 3) its frame rotations (material, rad per unit of mode).
@@ -311,19 +334,25 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
               K: np.ndarray | None = None) -> Stability:
     """Is the rest state (x, Q) stable? See the module docstring for what this proves.
 
-    An eigenvalue counts as negative below −1e-9 of the largest |λ| (the finite-difference
-    noise of K is ~1e-10 of its scale)."""
+    An eigenvalue counts as negative below −1e-9 of the largest diagonal entry of M⁻¹K (the
+    finite-difference noise of K is ~1e-10 of its scale)."""
     if K is None:
         K = stiffness_matrix(model, x, Q)
     scale = 1.0 / np.sqrt(masses(model, x))
     A = K * scale[:, None] * scale[None, :]
-    try:
-        scipy.linalg.cholesky(0.5 * (A + A.T), lower=True, check_finite=False)
+    order, width = rod_order(model.block_of)
+    try:  # banded in rod order: O(N·width²), a millisecond where a dense one takes 100
+        scipy.linalg.cholesky_banded(symmetric_band(A[np.ix_(order, order)], width),
+                                     check_finite=False)
         return Stability(True, 0, math.nan, "symmetric part")
     except np.linalg.LinAlgError:
         pass
-    values, vectors = scipy.linalg.eig(A, check_finite=False)
-    floor = -1e-9 * np.max(np.abs(values))
+    floor = -1e-9 * float(np.abs(np.diagonal(A)).max())
+    values, vectors = _eigenvalues_near_zero(A, K.shape[0])
+    if not np.any(values.real < floor):
+        # none of those nearest zero grows: a mode far below zero still could (a state far
+        # past an onset), so every eigenvalue is looked at (seconds at 958 unknowns, rare)
+        values, vectors = scipy.linalg.eig(A, check_finite=False)
     negative = np.flatnonzero(values.real < floor)
     lowest = float(values.real.min())
     if not len(negative):
@@ -341,6 +370,24 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     if size > 0:
         mode, rotation = mode / size, rotation / size
     return Stability(False, int(len(negative)), lowest, "eigenvalues", mode, rotation)
+
+
+# eigenvalues of M⁻¹K asked for when the symmetric test fails: the critical pair of a twisted
+# rod and a few more, so that a pair is counted whole
+NEAR_ZERO = 6
+
+
+def _eigenvalues_near_zero(A: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The NEAR_ZERO eigenvalues of A nearest zero and their vectors: shift-invert Arnoldi on
+    a sparse LU (A is banded in rod order; O(N) per solve), or every eigenvalue of a small A.
+    Near zero is where a mode goes unstable as a control moves; a mode far below zero grows
+    fast, and the kernel's probe sees it."""
+    if size <= 4 * NEAR_ZERO:
+        return scipy.linalg.eig(A, check_finite=False)
+    from scipy.sparse import csc_matrix
+    from scipy.sparse.linalg import eigs
+
+    return eigs(csc_matrix(A), k=NEAR_ZERO, sigma=0.0, which="LM", tol=1e-10)
 
 
 def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarray,
@@ -400,10 +447,7 @@ def solve(model: StaticModel, x: np.ndarray, Q: np.ndarray, *, force_scale: floa
     """Newton's method for the rest state nearest (x, Q): K·du = loads, banded LU in rod order
     (an unknown reaches REACH blocks), with a backtracking line search on the residual
     (halving up to 30 times). Converged when residual_norm < tolerance × force_scale."""
-    order = np.argsort(model.block_of, kind="stable")  # rod order: K is banded in it
-    blocks = model.block_of[order]
-    reach = np.searchsorted(blocks, blocks + REACH, side="right") - 1 - np.arange(len(order))
-    width = int(reach.max())
+    order, width = rod_order(model.block_of)  # K is banded in rod order
     x, Q = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(Q, dtype=float)
     r = loads(model, x, Q)
     norm = residual_norm(model, r)
