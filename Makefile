@@ -6,7 +6,7 @@ STAMP   = $(VENV)/.installed
 OUT    ?= out
 JOBS   ?= 2
 
-.PHONY: help install demo test lint bench figures phase fig3 clean
+.PHONY: help install demo test lint bench figures phase fig3 onset-study clean
 
 help:  ## list the targets
 	@grep -hE '^[A-Za-z0-9 -]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-9s %s\n", $$1, $$2}'
@@ -58,6 +58,9 @@ fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, wit
 
 figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)
 	$(BIN)/python scripts/figures.py --out $(OUT) --jobs $(JOBS)
+
+onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/reproduction.md)
+	$(BIN)/python scripts/onset_study.py --write
 
 clean:  ## remove outputs (keeps .venv)
 	rm -rf $(OUT) .pytest_cache

@@ -179,7 +179,11 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
                             "[0, 0, 0] with loading.quasi_static_below > 0")
     extension = C.straight_extension(cfg)
     # 1e-4 of the onset is far inside the margin 1 - fraction >= 0.05, at a third of the cost
-    onset = straight_onset_turns(rod, extension, tolerance=1e-4)
+    try:
+        onset = straight_onset_turns(rod, extension, tolerance=1e-4)
+    except ValueError as error:  # under-resolved for the onset's twist
+        raise C.ConfigError("rod.elements", rod.elements,
+                            f"{error}, with loading.quasi_static_below > 0") from None
     turns = math.copysign(min(abs(first_target), fraction * onset), first_target)
     # along the axis from the origin, every element stretched to the load's extension e; the
     # clamp reference is the untwisted straight rod's frame (all its frames are alike, and so

@@ -194,3 +194,31 @@ def test_the_phase_maps_onset_lines_are_the_models_and_greenhills():
     figure = P.phase_map(table, onset=lines)
     drawn = [line.get_label() for line in figure.axes[0].get_lines()]
     assert drawn == ["onset, model n = 40", "Greenhill, unsheared"]
+
+
+def test_the_onset_study_runs_small_and_writes_its_block(tmp_path):
+    # scripts/onset_study.py (make onset-study) at one extension: its table goes into the docs
+    # block (n = 80: G = E/3 doubles the onset twist, which 40 elements cannot resolve)
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+    import onset_study
+
+    docs = tmp_path / "doc.md"
+    docs.write_text("a\n<!-- onset_study:begin -->\nold\n<!-- onset_study:end -->\nb\n")
+    assert onset_study.main(["--elements", "80", "--extensions", "1.3", "--write",
+                             "--docs", str(docs), "--figure", str(tmp_path / "f.png")]) == 0
+    text = docs.read_text()
+    assert "old" not in text and "| 1.30 |" in text and (tmp_path / "f.png").exists()
+    lines = onset_study.study(80, [1.3])
+    # stiffer shear raises the onset towards Greenhill; G = E/3 raises it further
+    paper = lines["paper (G = 2E/3)"][0]
+    assert paper < lines["shear x 10"][0] < lines["shear x 100"][0] < lines["G = E/3"][0]
+
+
+def test_an_under_resolved_rod_has_no_onset_and_says_why():
+    # 16 elements at L/L0 = 1.3: the onset (13 turns at n = 80, the bracket 16.3) would turn
+    # elements by ~310°, past the matrix log's branch cut: it says how many are needed
+    with pytest.raises(ValueError, match="at least 37 elements"):
+        onset.straight_onset_turns(paper_rod(16), 1.3)

@@ -21,6 +21,7 @@ non-symmetric stiffness.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import scipy.linalg
@@ -137,19 +138,30 @@ class StraightBranch:
                                              select="i", select_range=(0, 0),
                                              check_finite=False)[0])
 
+    def _resolved(self, turns: float, guess: float) -> None:
+        """Refuse twists that turn neighbouring elements by more than 160°: the matrix log's
+        branch cut is at 180°, and no stiffness found that close to it means anything (the
+        kernel's own resolution guard stops a run at 135°)."""
+        limit = 8.0 * math.pi / 9.0
+        if TURN * turns / self.rod.elements > limit:
+            needed = math.ceil(TURN * turns / limit)
+            raise ValueError(f"at least {needed} elements: the onset's twist (about "
+                             f"{guess:.3g} turns at L/L0 = {self.extension:g}) would turn "
+                             f"neighbouring elements of {self.rod.elements} by more than 160°")
+
     def onset_turns(self, tolerance: float = 1e-6) -> float:
         """θ_c [turns], relative accuracy `tolerance`: bisection on the Cholesky test (a
         factorization costs a twentieth of an eigenvalue; the stiffness dominates)."""
         # bracketed around the unsheared clamped Greenhill twist: the model's onset lies at
         # 0.85-0.97 of it for the paper's rod (shear), and the bracket widens for any other
         guess = greenhill_turns(self.rod, self.extension)
+        self._resolved(1.05 * guess, guess)
         lo, hi = 0.7 * guess, 1.05 * guess
         while not self.stable(lo):
             lo, hi = 0.5 * lo, lo
         while self.stable(hi):
             lo, hi = hi, 1.5 * hi
-            if hi > 20 * guess:
-                raise ValueError(f"no onset below {hi:.3g} turns at L/L0 = {self.extension:g}")
+            self._resolved(hi, guess)
         while hi - lo > tolerance * hi:
             mid = 0.5 * (lo + hi)
             if self.stable(mid):
