@@ -139,7 +139,8 @@ def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
     clamped Greenhill twist, each as the rest Φa = θ·a0/L0 (`model_rest`, `greenhill_rest`)
     and as the stretched rod's (`model_current`, `greenhill_current`). None for a scene whose
     rod is not clamped at both ends under an end load, or whose resolved config is not there
-    (the onset is for that rod only)."""
+    (the onset is for that rod only). Where the rod has too few elements to resolve its onset
+    the model's line is NaN (left out)."""
     from .rod.model import Rod
     from .rod.onset import greenhill_turns, straight_onset_turns
 
@@ -164,7 +165,14 @@ def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
     if not loaded or not rod.incompressible or rod.law != "paper":
         return None
     e = np.asarray(extensions, dtype=float)
-    model = np.array([straight_onset_turns(rod, v, tolerance=1e-4) for v in e])
+
+    def model_onset(extension: float) -> float:
+        try:
+            return straight_onset_turns(rod, extension, tolerance=1e-4)
+        except ValueError:  # too few elements to resolve that twist: no line there
+            return np.nan
+
+    model = np.array([model_onset(v) for v in e])
     greenhill = np.array([greenhill_turns(rod, v) for v in e])
     to_phi = units.TURN * rod.radius / rod.length  # turns -> rest Φa
     lines = pd.DataFrame({

@@ -907,13 +907,27 @@ def _running_sweep(lab: Lab, name: str, env_extra: dict | None):
     out = d / "out.h5"
     bg, problems = _start_and_wait_for_workers(lab, name, lab.cfg_long, out, d, env_extra)
     if not problems:
-        deadline = time.monotonic() + 60
-        while not out.exists() and time.monotonic() < deadline and bg.proc.poll() is None:
-            time.sleep(0.1)
-        time.sleep(1.0)  # at ~0.3 s a run, some runs are stored by now
+        deadline = time.monotonic() + 90
+        # until a run is stored: a fixed wait was too short on a loaded machine, and a reader
+        # rightly answered "no finished runs yet"
+        while (_stored_runs(out) < 1 and time.monotonic() < deadline
+               and bg.proc.poll() is None):
+            time.sleep(0.2)
         if not out.exists():
             problems.append("the output never appeared")
     return d, out, bg, problems
+
+
+def _stored_runs(out: Path) -> int:
+    """Runs stored so far in a store a sweep is writing, its unmerged parts included (0 while
+    it cannot be read yet)."""
+    from rodphase.store import read_store
+
+    try:
+        with read_store(out) as store:
+            return len(store.run_ids())
+    except Exception:  # not there yet, or not yet a store: keep waiting
+        return 0
 
 
 def _finish_first(lab: Lab, bg: Background, out: Path, ref: dict) -> list[str]:

@@ -222,3 +222,16 @@ def test_an_under_resolved_rod_has_no_onset_and_says_why():
     # elements by ~310°, past the matrix log's branch cut: it says how many are needed
     with pytest.raises(ValueError, match="at least 37 elements"):
         onset.straight_onset_turns(paper_rod(16), 1.3)
+
+
+def test_a_coarse_sweeps_map_leaves_out_the_onset_it_cannot_resolve():
+    # 12 elements cannot resolve the onset at L/L0 = 1.3 (it needs 37): the line is left out
+    # there, not the whole figure refused
+    from rodphase import config as C
+    from rodphase.scenes import SCENES
+    from rodphase.tabulate import onset_lines
+
+    scene = C.load_scene("twist_under_load", [("rod.elements", 12)], SCENES).plain()
+    lines = onset_lines({"scene": scene}, [1.02, 1.3])
+    assert np.isfinite(lines["model_rest"].iloc[0]) and np.isnan(lines["model_rest"].iloc[1])
+    assert np.isfinite(lines["greenhill_rest"]).all()
