@@ -149,7 +149,7 @@ def stiffness(x, Q, rod, ends, incompressible, neo_hookean, now, free, block_of,
     Columns are taken `stride` blocks apart at once (block_of (N,): each unknown's block);
     with stride ≥ 2·REACH + 1 their loads do not overlap, and a column keeps only the rows
     within REACH blocks of its own. stride > the number of blocks gives the plain dense
-    difference, one column at a time. x and Q are restored exactly (copies are perturbed).
+    difference, one column at a time. x and Q are not changed (copies are perturbed).
     """
     N = block_of.shape[0]
     m = free.shape[1]
@@ -164,22 +164,23 @@ def stiffness(x, Q, rod, ends, incompressible, neo_hookean, now, free, block_of,
             K[r, c] = 0.0
     step = np.zeros((3, n + 1))
     turn = np.zeros((3, n))
+    chosen = np.zeros(N, dtype=np.bool_)
     for kind in range(6):  # position component or rotation component, one per column group
         for first in range(min(stride, blocks)):
             # the unknowns of this colour: kind `kind` in blocks first, first + stride, ...
             step[:, :] = 0.0
             turn[:, :] = 0.0
-            any_column = False
+            chosen[:] = False
             for j in range(N):
                 if (block_of[j] - first) % stride != 0 or not columns[j]:
                     continue
                 if j < m and kind == free[0, j]:
                     step[free[0, j], free[1, j]] = h_position
-                    any_column = True
+                    chosen[j] = True
                 elif j >= m and kind == 3 + (j - m) % 3:
                     turn[(j - m) % 3, (j - m) // 3] = h_rotation
-                    any_column = True
-            if not any_column:
+                    chosen[j] = True
+            if not chosen.any():
                 continue
             # ± the steps; frames turned as the kernel's drift turns them (exp(∓[φ]×)·Q,
             # exactly the identity where φ = 0)
@@ -194,11 +195,9 @@ def stiffness(x, Q, rod, ends, incompressible, neo_hookean, now, free, block_of,
             loads_at_rest(xm, Qm, rod, ends, incompressible, neo_hookean, now, force, torque)
             _gather(force, torque, free, minus)
             for j in range(N):
+                if not chosen[j]:
+                    continue
                 b = block_of[j]
-                if (b - first) % stride != 0 or not columns[j]:
-                    continue
-                if not ((j < m and kind == free[0, j]) or (j >= m and kind == 3 + (j - m) % 3)):
-                    continue
                 h = h_position if j < m else h_rotation
                 for r in range(N):
                     if stride <= blocks and abs(block_of[r] - b) > REACH:
