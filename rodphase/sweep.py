@@ -127,6 +127,40 @@ def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
             for k, (rid, p) in enumerate(zip(job.run_ids, job.params))]
 
 
+@dataclass
+class Prepared:
+    """A finished run as a worker hands it back to the parent: its part file, built in the
+    worker (store.run_image), and what the parent reports. Building the HDF5 objects of a
+    run is most of what storing it costs: done in the workers it is spread over the cores,
+    and the parent, which alone writes the store, only writes bytes."""
+
+    status: str
+    message: str
+    wall_time: float  # s, the simulation's
+    image: bytes
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+def execute_batch(jobs: list[Job], config_hash: str | None = None) -> list[tuple]:
+    """Worker entry point for a task of one or more jobs: every job's outcomes, in order.
+    With the store's config_hash, each finished run comes back as its part file (Prepared)."""
+    from .store import run_image
+
+    outcomes = []
+    for job in jobs:
+        for run_id, params, result, error in execute(job):
+            if result is not None and config_hash is not None:
+                wall = result.diagnostics.get("wall_time", 0.0)
+                result = Prepared(result.status, result.message, wall,
+                                  run_image(run_id, params, result, {"wall_time": wall},
+                                            config_hash))
+            outcomes.append((run_id, params, result, error))
+    return outcomes
+
+
 def split_continuation(result: RunResult, k: int, incompressible: bool = True) -> RunResult:
     """The k-th sample of a continuation run: the state where its hold ended, the history up
     to there, and the status of that hold (or of the run, if it stopped before)."""
@@ -358,18 +392,21 @@ WORKER_DEATH_RETRIES = 1
 
 
 def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport) -> None:
-    """Run jobs on the pool, a bounded number at a time; the parent stores each finished run
-    the moment it arrives, so finished results never pile up in memory and a kill loses only
-    the runs in flight."""
+    """Run jobs on the pool, a bounded number of tasks at a time; the parent stores each
+    finished run the moment it arrives, so finished results never pile up in memory and a
+    kill loses only the runs in flight. Short runs go several to a task (see _Batches)."""
     bar = _progress(sum(len(j.run_ids) for j in todo), progress)
     waiting = list(reversed(todo))  # pop() takes them in sampling order
-    running: dict = {}  # future -> job
+    running: dict = {}  # future -> task (a list of jobs)
     deaths: dict[int, int] = {}  # id(job) -> times its worker died under it
+    batches = _Batches(pool.workers)
+    config_hash = store.attrs["config_hash"]
     try:
         while waiting or running:
             while waiting and len(running) < pool.window:
-                job = waiting.pop()
-                running[pool.submit(job)] = job
+                task = [waiting.pop() for _ in range(min(len(waiting),
+                                                         batches.size(len(waiting))))]
+                running[pool.submit(task, config_hash)] = task
             outage = None
             try:
                 with interruptible():
@@ -377,15 +414,22 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
             except Outage as exc:
                 outage, done = exc, ()
             for future in done:
-                job = running.pop(future)
+                task = running.pop(future)
                 try:
-                    outcomes = future.result()
+                    arrived = future.result()
                 except Exception as exc:
                     outage = pool.outage(exc)
-                    if outage:  # not the job's failure: the scheduler went as it arrived
-                        running[future] = job
+                    if outage:  # not the task's failure: the scheduler went as it arrived
+                        running[future] = task
                         break
                     died = pool.worker_died(exc)
+                    if died and len(task) > 1:
+                        # which job killed it is unknown: each goes again on its own
+                        log.warning("a worker died under a task of %d jobs (%s): running "
+                                    "them again one by one", len(task), died)
+                        waiting.extend(reversed(task))
+                        continue
+                    job = task[0]
                     if died and deaths.get(id(job), 0) < WORKER_DEATH_RETRIES:
                         log.warning("a worker died under %s (%s): running it again",
                                     ", ".join(job.run_ids), died)
@@ -396,12 +440,18 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                             f"{deaths.get(id(job), 0) + 1} time(s); it may need more memory "
                             "than the machine has, or crashed the interpreter") if died else (
                             f"the job failed in its worker: {type(exc).__name__}: {exc}")
-                    outcomes = [(rid, p, None, what) for rid, p in zip(job.run_ids, job.params)]
-                for run_id, params, result, error in outcomes:
+                    arrived = [(rid, p, None, what) for j in task
+                               for rid, p in zip(j.run_ids, j.params)]
+                scenes = {rid: j.scene for j in task for rid in j.run_ids}
+                for run_id, params, result, error in arrived:
                     if result is None:
-                        result = error_result(job.scene, error)
-                    store.write_run(run_id, params, result,
-                                    {"wall_time": result.diagnostics.get("wall_time", 0.0)})
+                        result = error_result(scenes[run_id], error)
+                    if isinstance(result, Prepared):
+                        store.write_part(run_id, result.image)
+                        batches.note(result.wall_time)
+                    else:
+                        store.write_run(run_id, params, result,
+                                        {"wall_time": result.diagnostics.get("wall_time", 0.0)})
                     log.info("stored %s: %s", run_id, result.status)
                     if result.ok:
                         report.done += 1
@@ -411,20 +461,47 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                                                 result.message.splitlines()[-1]
                                                 if result.message else ""))
                     bar.update(1)
-                    bar.set_postfix(done=report.done, failed=report.failed)
+                    bar.set_postfix(done=report.done, failed=report.failed, refresh=False)
             if outage is not None:
                 # the runs in flight are lost with the scheduler: send them again once it is
                 # back (none of them was stored or counted, so none is counted twice)
-                lost = list(running.values())
+                lost = [job for task in running.values() for job in task]
                 running.clear()
                 waiting.extend(reversed(lost))
                 in_flight = sum(len(j.run_ids) for j in lost)
                 log.warning("%s; the %d run(s) in flight will be sent again", outage, in_flight)
                 with interruptible():
                     pool.recover(outage, in_flight=in_flight)
+                batches.workers = pool.workers
             _stop.check()
     finally:
         bar.close()
+
+
+class _Batches:
+    """How many jobs go into one task. A task costs the parent and the pool a few
+    milliseconds whatever it holds (submission, a round trip, pickling the scene); a run of
+    a few milliseconds (continuation, tiny rods) would cost more around it than inside it.
+    So jobs go several to a task once the runs are seen to be short: enough for about
+    TASK_SECONDS of simulation, never more than MAX_JOBS (a killed worker loses a task's
+    runs), and never so many that the jobs left would not keep every worker busy."""
+
+    TASK_SECONDS = 0.25
+    MAX_JOBS = 32
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self.seconds: list[float] = []  # the last runs' simulation times
+
+    def note(self, wall_time: float) -> None:
+        self.seconds = (self.seconds + [wall_time])[-64:]
+
+    def size(self, left: int) -> int:
+        if len(self.seconds) < 2 * self.workers:
+            return 1  # nothing known yet: longest first means the first runs are the longest
+        typical = max(float(np.median(self.seconds)), 1e-4)
+        fits = int(self.TASK_SECONDS / typical)
+        return max(1, min(fits, self.MAX_JOBS, left // (4 * self.workers)))
 
 
 # ---------------------------------------------------------------- pools
@@ -449,8 +526,8 @@ class _LocalPool:
             env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
         return self._executor
 
-    def submit(self, job):
-        return self._get().submit(execute, job)
+    def submit(self, task, config_hash=None):
+        return self._get().submit(execute_batch, task, config_hash)
 
     def finished(self, futures):
         from concurrent.futures import FIRST_COMPLETED, wait
@@ -514,8 +591,8 @@ class _DaskPool:
         self.window = 2 * self.workers
         return threads
 
-    def submit(self, job):
-        return self.client.submit(execute, job, pure=False)
+    def submit(self, task, config_hash=None):
+        return self.client.submit(execute_batch, task, config_hash, pure=False)
 
     def finished(self, futures):
         from concurrent.futures import CancelledError
