@@ -700,34 +700,39 @@ def _name_dimensions(g: h5py.Group, fresh: bool = False) -> None:
     references are file addresses, and HDF5's copy does not re-point them). `fresh`: the
     group was just written and has no references yet.
 
-    Low-level calls (h5py.h5ds, object ids): the high-level ones cost about as much again
-    per array in Python as HDF5 does, and a sweep names the dimensions of every run twice."""
-    members = set(g)
-    history, snapshots = g["history"], g["snapshots"]
-    history_members = [name for name in history if name != "time"]
+    Low-level calls on object ids (h5py.h5o, h5py.h5ds): the high-level lookups and proxies
+    cost several times what HDF5 does, and a sweep names the dimensions of every run it
+    merges."""
+    from h5py import h5a, h5ds, h5o
+
+    gid = g.id
+    members = set(gid)  # names, as bytes
+    history, snapshots = h5o.open(gid, b"history"), h5o.open(gid, b"snapshots")
     snapshot_members = set(snapshots)
     # a run written before clamp_frames has no `clamp` scale
-    scales = {name: g[name].id for name in ("node", "element", "director", "xyz", "clamp")
-              if name in members}
-    times = {"history": history["time"].id, "snapshots": snapshots["time"].id}
+    scales = {name: h5o.open(gid, name.encode())
+              for name in ("node", "element", "director", "xyz", "clamp")
+              if name.encode() in members}
+    times = {"history": h5o.open(history, b"time"), "snapshots": h5o.open(snapshots, b"time")}
     labelled = []  # (dataset id, scale ids by axis)
     for name, dims in DIMENSIONS.items():
         where, _, leaf = name.rpartition("/")
-        if not (leaf in snapshot_members if where else name in members):
+        if leaf.encode() not in (snapshot_members if where else members):
             continue
-        ds = (snapshots if where else g)[leaf].id
+        ds = h5o.open(snapshots if where else gid, leaf.encode())
         labelled.append((ds, [times["snapshots"] if d == "time" else scales[d] for d in dims]))
-    labelled += [(history[name].id, [times["history"]]) for name in history_members]
+    labelled += [(h5o.open(history, name), [times["history"]]) for name in history
+                 if name != b"time"]
     if not fresh:
-        for ds in [ds for ds, _ in labelled]:
-            if h5py.h5a.exists(ds, b"DIMENSION_LIST"):
-                h5py.h5a.delete(ds, b"DIMENSION_LIST")
+        for ds, _ in labelled:
+            if h5a.exists(ds, b"DIMENSION_LIST"):
+                h5a.delete(ds, b"DIMENSION_LIST")
         for ds in list(scales.values()) + list(times.values()):
-            if h5py.h5a.exists(ds, b"REFERENCE_LIST"):
-                h5py.h5a.delete(ds, b"REFERENCE_LIST")
+            if h5a.exists(ds, b"REFERENCE_LIST"):
+                h5a.delete(ds, b"REFERENCE_LIST")
     for ds, axes in labelled:
         for axis, scale in enumerate(axes):
-            h5py.h5ds.attach_scale(ds, scale, axis)
+            h5ds.attach_scale(ds, scale, axis)
 
 
 def _fill_run(g: h5py.Group, params: dict, result: RunResult, timings: dict,

@@ -106,9 +106,6 @@ def breakdown(folder: Path, store_path: Path) -> dict:
         lambda: pickle.loads(pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)))
     parts["  bytes per run"] = float(len(pickle.dumps(outcome, protocol=5)))
     parts["serialise the job sent (per run)"] = timed(lambda: pickle.loads(pickle.dumps(job)))
-    if hasattr(S, "run_image"):
-        parts["build the run's part in memory"] = timed(
-            lambda: S.run_image(run_id, params, result, timings, "0" * 16))
     target = folder / "breakdown.h5"
     text, digest = C.to_yaml(sweep=sweep, scene=scene), C.config_hash(sweep, scene)
     with S.open_store(target, config_text=text, config_hash=digest, version="bench",
@@ -117,9 +114,17 @@ def breakdown(folder: Path, store_path: Path) -> dict:
         parts["write_run (build + write + fsync + rename)"] = timed(
             lambda: store.write_run(f"run-{next(counter):05d}", params, result, timings), 20)
         if hasattr(store, "write_part"):  # the parent's share when a worker built the part
-            image = S.run_image(run_id, params, result, timings, digest)
-            parts["write_part (write + fsync + rename)"] = timed(
-                lambda: store.write_part(f"run-{next(counter):05d}", image), 20)
+            names = [f"run-{next(counter):05d}" for _ in range(20)]
+            images = {name: S.run_image(name, params, result, timings, digest) for name in names}
+            parts["build the part in memory (a worker's share)"] = timed(
+                lambda: S.run_image(run_id, params, result, timings, digest), 20)
+            order = iter(names)
+
+            def write_next():
+                name = next(order)
+                store.write_part(name, images[name])
+
+            parts["write_part (write + fsync + rename)"] = timed(write_next, 20)
         # a merge of MERGE_EVERY parts into a main file that already holds 400 runs
         for k in range(400 - len(store.run_ids())):
             store.write_run(f"run-{next(counter):05d}", params, result, timings)
