@@ -178,7 +178,8 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     except ClusterLost as exc:
         import shlex
 
-        again = shlex.join(["rodphase", *sys.argv[1:]]) if sys.argv[1:2] == ["sweep"] else (
+        # the command as typed (`rodphase -v sweep ...` too); from elsewhere, in words
+        again = shlex.join(["rodphase", *sys.argv[1:]]) if "sweep" in sys.argv[1:3] else (
             "the same rodphase sweep command")
         click.echo(f"stopped: {exc.what}; {exc.stored} of {exc.total} runs are stored in "
                    f"{output}; once the cluster is back, go on with: {again}", err=True)
