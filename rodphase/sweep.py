@@ -154,9 +154,12 @@ def execute_batch(jobs: list[Job], config_hash: str | None = None) -> list[tuple
         for run_id, params, result, error in execute(job):
             if result is not None and config_hash is not None:
                 wall = result.diagnostics.get("wall_time", 0.0)
-                result = Prepared(result.status, result.message, wall,
-                                  run_image(run_id, params, result, {"wall_time": wall},
-                                            config_hash))
+                try:
+                    result = Prepared(result.status, result.message, wall,
+                                      run_image(run_id, params, result, {"wall_time": wall},
+                                                config_hash))
+                except Exception:  # the parent's write_run meets it again and says why
+                    log.debug("building %s in the worker failed", run_id, exc_info=True)
             outcomes.append((run_id, params, result, error))
     return outcomes
 
@@ -577,7 +580,7 @@ class _DaskPool:
         self._quiet = _QuietDistributed()
         self.client, self.cluster, self.where = client, cluster, where
         self.address, self.patience = address, patience
-        self._count_workers()
+        self._seen = self._count_workers() > 0  # a worker was there at some time
         self._checked = time.monotonic()
         self._alone_since: float | None = None  # when the last worker left
 
@@ -625,15 +628,15 @@ class _DaskPool:
         if threads:
             if self._alone_since is not None:
                 log.warning("%d worker thread(s) in the cluster again", threads)
-            self._alone_since = None
+            self._alone_since, self._seen = None, True
             return
+        what = ("every worker left the Dask cluster at {} and none came back" if self._seen
+                else "no worker joined the Dask cluster at {}").format(self.address or "(local)")
         if self._alone_since is None:
             self._alone_since = time.monotonic()
-            log.warning("every worker left the Dask cluster at %s: waiting up to %g s for one",
-                        self.address or "(local)", self.patience)
+            log.warning("%s: waiting up to %g s for one", what, self.patience)
         elif time.monotonic() - self._alone_since > self.patience:
-            raise ClusterLost(f"every worker left the Dask cluster at {self.address} and none "
-                              f"came back within {self.patience:g} s")
+            raise ClusterLost(f"{what} within {self.patience:g} s")
 
     def recover(self, outage: Outage, in_flight: int) -> None:
         """Connect again to the scheduler's address within `patience` s (it may be
