@@ -186,12 +186,16 @@ def _escapes_line(result) -> str:
               show_default=True, help="loky: processes on this machine; dask: a Dask cluster.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Dask scheduler address (tcp://host:8786); default: a local cluster.")
+@click.option("--reconnect-timeout", default="120", show_default=True, metavar="SECONDS",
+              help="Dask: how long to wait for a lost scheduler to answer again (then the runs "
+              "in flight are sent again), or for a worker once every worker has left.")
 @click.option("--retry-failed", is_flag=True, help="Run again the runs that failed before.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
-def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quiet, force):
+def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry_failed, sets,
+          quiet, force):
     """Run a sweep: sample the scene over its axes and simulate every sample.
 
     Every finished run is safe on disk as soon as it is counted: after Ctrl-C, SIGTERM, a
@@ -205,14 +209,28 @@ def sweep(sweep_file, output, jobs, backend, scheduler, retry_failed, sets, quie
     """
     from .runner import check_jobs_memory
     from .scenes import SCENES
-    from .sweep import plan, run_sweep
+    from .sweep import ClusterLost, plan, run_sweep
 
     sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
     check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
-    _make_parent(output)
-    report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
-                       scheduler=scheduler, retry_failed=retry_failed, replace=force,
-                       progress=not quiet, echo=click.echo)
+    try:
+        patience = float(reconnect_timeout)
+    except ValueError:
+        patience = reconnect_timeout  # refused by run_sweep, by name
+    # run_sweep makes the output's folder, once nothing can refuse to start any more
+    try:
+        report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
+                           scheduler=scheduler, retry_failed=retry_failed, replace=force,
+                           progress=not quiet, echo=click.echo, reconnect_timeout=patience)
+    except ClusterLost as exc:
+        import shlex
+
+        # the command as typed (`rodphase -v sweep ...` too); from elsewhere, in words
+        again = shlex.join(["rodphase", *sys.argv[1:]]) if "sweep" in sys.argv[1:3] else (
+            "the same rodphase sweep command")
+        click.echo(f"stopped: {exc.what}; {exc.stored} of {exc.total} runs are stored in "
+                   f"{output}; once the cluster is back, go on with: {again}", err=True)
+        sys.exit(1)
     if report.stopped_by:
         import signal
 

@@ -21,6 +21,7 @@ import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -126,6 +127,43 @@ def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
             for k, (rid, p) in enumerate(zip(job.run_ids, job.params))]
 
 
+@dataclass
+class Prepared:
+    """A finished run as a worker hands it back to the parent: its part file, built in the
+    worker (store.run_image), and what the parent reports. Building the HDF5 objects of a
+    run is most of what storing it costs: done in the workers it is spread over the cores,
+    and the parent, which alone writes the store, only writes bytes."""
+
+    status: str
+    message: str
+    wall_time: float  # s, the simulation's
+    image: bytes
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+def execute_batch(jobs: list[Job], config_hash: str | None = None) -> list[tuple]:
+    """Worker entry point for a task of one or more jobs: every job's outcomes, in order.
+    With the store's config_hash, each finished run comes back as its part file (Prepared)."""
+    from .store import run_image
+
+    outcomes = []
+    for job in jobs:
+        for run_id, params, result, error in execute(job):
+            if result is not None and config_hash is not None:
+                wall = result.diagnostics.get("wall_time", 0.0)
+                try:
+                    result = Prepared(result.status, result.message, wall,
+                                      run_image(run_id, params, result, {"wall_time": wall},
+                                                config_hash))
+                except Exception:  # the parent's write_run meets it again and says why
+                    log.debug("building %s in the worker failed", run_id, exc_info=True)
+            outcomes.append((run_id, params, result, error))
+    return outcomes
+
+
 def split_continuation(result: RunResult, k: int, incompressible: bool = True) -> RunResult:
     """The k-th sample of a continuation run: the state where its hold ended, the history up
     to there, and the status of that hold (or of the run, if it stopped before)."""
@@ -221,6 +259,11 @@ def _describe(point: dict) -> str:
 
 # ---------------------------------------------------------------- execution
 
+# s a Dask sweep waits for a lost scheduler to answer again, or for a worker once all left
+RECONNECT_TIMEOUT = 120.0
+MAX_RECONNECT_TIMEOUT = 7 * 24 * 3600.0
+
+
 @dataclass
 class SweepReport:
     total: int
@@ -235,25 +278,39 @@ class SweepReport:
 
 def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "loky",
               scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
-              progress: bool = True, echo: Callable[[str], None] = print) -> SweepReport:
+              progress: bool = True, echo: Callable[[str], None] = print,
+              reconnect_timeout: float = RECONNECT_TIMEOUT) -> SweepReport:
     """Run every missing sample of the sweep into the store at `out_path` (resuming).
 
     Each finished run is durable in the store as soon as it arrives (see store.py). SIGINT and
     SIGTERM stop the sweep: the workers are killed, what finished is kept, and the report's
     `stopped_by` names the signal. A full disk raises StoreFull with every stored run intact.
-    With replace=True a store of another config is replaced, once the first run is stored."""
+    With replace=True a store of another config is replaced, once the first run is stored.
+
+    On Dask, a scheduler that is lost (killed, restarted, unreachable) is waited for and
+    reconnected to for `reconnect_timeout` seconds, and so is a worker once every worker has
+    left; the runs in flight are sent again. Past that, ClusterLost says what was lost and
+    how many runs are stored."""
     from .store import open_store
 
-    _check_backend(backend, scheduler)  # before the store is made or anything compiled
+    # before the store is made or anything compiled: a command that refuses to start
+    # creates nothing on disk
+    _check_backend(backend, scheduler, reconnect_timeout)
     text = C.to_yaml(sweep=sweep, scene=scene)
     digest = C.config_hash(sweep, scene)
     report = SweepReport(0, 0, 0, 0, 0.0, [])
     with stop_on_signals() as stop:
         try:
-            # the lock and the config check come first: a second writer or another config's
-            # file is refused before anything is compiled or simulated
-            with open_store(out_path, config_text=text, config_hash=digest, version=__version__,
-                            kind="sweep", replace=replace) as store:
+            # a scheduler that does not answer is refused before the store exists
+            with contextlib.ExitStack() as stack:
+                pool = (stack.enter_context(_pool(backend, scheduler, jobs, reconnect_timeout))
+                        if scheduler else None)
+                _make_folder(out_path)
+                # the lock and the config check come next: a second writer or another
+                # config's file is refused before anything is compiled or simulated
+                store = stack.enter_context(open_store(
+                    out_path, config_text=text, config_hash=digest, version=__version__,
+                    kind="sweep", replace=replace))
                 if backend == "loky":
                     echo("Compiling the kernel (once; numba caches it on disk) ...")
                     cpu = cpu_seconds()
@@ -263,15 +320,30 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
                          f"(CPU {cpu_seconds() - cpu:.1f} s)")
                 start = time.perf_counter()
                 try:
-                    with _pool(backend, scheduler, jobs) as pool:
-                        _run_rounds(sweep, scene, store, pool, retry_failed, progress, report,
-                                    echo, out_path)
+                    if pool is None:
+                        pool = stack.enter_context(
+                            _pool(backend, scheduler, jobs, reconnect_timeout))
+                    _run_rounds(sweep, scene, store, pool, retry_failed, progress, report,
+                                echo, out_path)
+                except ClusterLost as exc:
+                    exc.stored = len(store.run_ids())
+                    exc.total = max(report.total, exc.stored)
+                    raise
                 finally:
                     report.wall = time.perf_counter() - start
         except Interrupted:
             pass
         report.stopped_by = stop.signal_name
     return report
+
+
+def _make_folder(out_path: str) -> None:
+    """`-o out/x.h5` on a fresh checkout: make `out/` rather than fail in h5py."""
+    try:
+        Path(out_path).parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise C.ConfigError("--output", out_path, f"a path whose folder exists or can be made "
+                            f"({exc.strerror}: {exc.filename})") from None
 
 
 def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path):
@@ -323,26 +395,44 @@ WORKER_DEATH_RETRIES = 1
 
 
 def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport) -> None:
-    """Run jobs on the pool, a bounded number at a time; the parent stores each finished run
-    the moment it arrives, so finished results never pile up in memory and a kill loses only
-    the runs in flight."""
+    """Run jobs on the pool, a bounded number of tasks at a time; the parent stores each
+    finished run the moment it arrives, so finished results never pile up in memory and a
+    kill loses only the runs in flight. Short runs go several to a task (see _Batches)."""
     bar = _progress(sum(len(j.run_ids) for j in todo), progress)
     waiting = list(reversed(todo))  # pop() takes them in sampling order
-    running: dict = {}  # future -> job
+    running: dict = {}  # future -> task (a list of jobs)
     deaths: dict[int, int] = {}  # id(job) -> times its worker died under it
+    batches = _Batches(pool.workers)
+    config_hash = store.attrs["config_hash"]
     try:
         while waiting or running:
             while waiting and len(running) < pool.window:
-                job = waiting.pop()
-                running[pool.submit(job)] = job
-            with interruptible():
-                done = pool.finished(list(running))
+                task = [waiting.pop() for _ in range(min(len(waiting),
+                                                         batches.size(len(waiting))))]
+                running[pool.submit(task, config_hash)] = task
+            outage = None
+            try:
+                with interruptible():
+                    done = pool.finished(list(running))
+            except Outage as exc:
+                outage, done = exc, ()
             for future in done:
-                job = running.pop(future)
+                task = running.pop(future)
                 try:
-                    outcomes = future.result()
+                    arrived = future.result()
                 except Exception as exc:
+                    outage = pool.outage(exc)
+                    if outage:  # not the task's failure: the scheduler went as it arrived
+                        running[future] = task
+                        break
                     died = pool.worker_died(exc)
+                    if died and len(task) > 1:
+                        # which job killed it is unknown: each goes again on its own
+                        log.warning("a worker died under a task of %d jobs (%s): running "
+                                    "them again one by one", len(task), died)
+                        waiting.extend(reversed(task))
+                        continue
+                    job = task[0]
                     if died and deaths.get(id(job), 0) < WORKER_DEATH_RETRIES:
                         log.warning("a worker died under %s (%s): running it again",
                                     ", ".join(job.run_ids), died)
@@ -353,12 +443,18 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                             f"{deaths.get(id(job), 0) + 1} time(s); it may need more memory "
                             "than the machine has, or crashed the interpreter") if died else (
                             f"the job failed in its worker: {type(exc).__name__}: {exc}")
-                    outcomes = [(rid, p, None, what) for rid, p in zip(job.run_ids, job.params)]
-                for run_id, params, result, error in outcomes:
+                    arrived = [(rid, p, None, what) for j in task
+                               for rid, p in zip(j.run_ids, j.params)]
+                scenes = {rid: j.scene for j in task for rid in j.run_ids}
+                for run_id, params, result, error in arrived:
                     if result is None:
-                        result = error_result(job.scene, error)
-                    store.write_run(run_id, params, result,
-                                    {"wall_time": result.diagnostics.get("wall_time", 0.0)})
+                        result = error_result(scenes[run_id], error)
+                    if isinstance(result, Prepared):
+                        store.write_part(run_id, result.image)
+                        batches.note(result.wall_time)
+                    else:
+                        store.write_run(run_id, params, result,
+                                        {"wall_time": result.diagnostics.get("wall_time", 0.0)})
                     log.info("stored %s: %s", run_id, result.status)
                     if result.ok:
                         report.done += 1
@@ -368,10 +464,47 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                                                 result.message.splitlines()[-1]
                                                 if result.message else ""))
                     bar.update(1)
-                    bar.set_postfix(done=report.done, failed=report.failed)
+                    bar.set_postfix(done=report.done, failed=report.failed, refresh=False)
+            if outage is not None:
+                # the runs in flight are lost with the scheduler: send them again once it is
+                # back (none of them was stored or counted, so none is counted twice)
+                lost = [job for task in running.values() for job in task]
+                running.clear()
+                waiting.extend(reversed(lost))
+                in_flight = sum(len(j.run_ids) for j in lost)
+                log.warning("%s; the %d run(s) in flight will be sent again", outage, in_flight)
+                with interruptible():
+                    pool.recover(outage, in_flight=in_flight)
+                batches.workers = pool.workers
             _stop.check()
     finally:
         bar.close()
+
+
+class _Batches:
+    """How many jobs go into one task. A task costs the parent and the pool a few
+    milliseconds whatever it holds (submission, a round trip, pickling the scene); a run of
+    a few milliseconds (continuation, tiny rods) would cost more around it than inside it.
+    So jobs go several to a task once the runs are seen to be short: enough for about
+    TASK_SECONDS of simulation, never more than MAX_JOBS (a killed worker loses a task's
+    runs), and never so many that the jobs left would not keep every worker busy."""
+
+    TASK_SECONDS = 0.25
+    MAX_JOBS = 32
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self.seconds: list[float] = []  # the last runs' simulation times
+
+    def note(self, wall_time: float) -> None:
+        self.seconds = (self.seconds + [wall_time])[-64:]
+
+    def size(self, left: int) -> int:
+        if len(self.seconds) < 2 * self.workers:
+            return 1  # nothing known yet: longest first means the first runs are the longest
+        typical = max(float(np.median(self.seconds)), 1e-4)
+        fits = int(self.TASK_SECONDS / typical)
+        return max(1, min(fits, self.MAX_JOBS, left // (4 * self.workers)))
 
 
 # ---------------------------------------------------------------- pools
@@ -396,14 +529,17 @@ class _LocalPool:
             env={"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
         return self._executor
 
-    def submit(self, job):
-        return self._get().submit(execute, job)
+    def submit(self, task, config_hash=None):
+        return self._get().submit(execute_batch, task, config_hash)
 
     def finished(self, futures):
         from concurrent.futures import FIRST_COMPLETED, wait
 
         # a timeout keeps the parent responsive to signals while the workers compute
         return wait(futures, timeout=0.5, return_when=FIRST_COMPLETED).done
+
+    def outage(self, exc) -> Outage | None:
+        return None  # the workers are this process's children: there is no connection to lose
 
     def worker_died(self, exc) -> str:
         from concurrent.futures.process import BrokenProcessPool
@@ -417,23 +553,128 @@ class _LocalPool:
             self._executor.shutdown(wait=True, kill_workers=True)
 
 
-class _DaskPool:
-    def __init__(self, client, cluster, where: str):
-        self.client, self.cluster, self.where = client, cluster, where
-        self.workers = max(1, sum(w.get("nthreads", 1) for w in
-                                  client.scheduler_info().get("workers", {}).values()))
-        self.window = 2 * self.workers
+class Outage(Exception):
+    """The Dask scheduler was lost: the futures in flight are gone (the sweep sends them
+    again once the pool has recovered)."""
 
-    def submit(self, job):
-        return self.client.submit(execute, job, pure=False)
+
+class ClusterLost(Exception):
+    """The Dask scheduler, or every worker, stayed away longer than the sweep waits.
+    `stored` and `total` (set by run_sweep) count the runs in the store and in the sweep."""
+
+    def __init__(self, what: str):
+        super().__init__(what)
+        self.what = what
+        self.stored = 0
+        self.total = 0
+
+
+class _DaskPool:
+    """A Dask client fed a few jobs at a time, that rides out a lost scheduler (it connects
+    again to the same address) and a cluster whose workers all left, for `patience` s each."""
+
+    CHECK_EVERY = 2.0  # s between asking the scheduler how many workers it has
+
+    def __init__(self, client, cluster, where: str, address: str | None = None,
+                 patience: float = 0.0):
+        self._quiet = _QuietDistributed()
+        self.client, self.cluster, self.where = client, cluster, where
+        self.address, self.patience = address, patience
+        self._seen = self._count_workers() > 0  # a worker was there at some time
+        self._checked = time.monotonic()
+        self._alone_since: float | None = None  # when the last worker left
+
+    def _count_workers(self) -> int:
+        info = self.client.scheduler_info().get("workers", {})
+        threads = sum(w.get("nthreads", 1) for w in info.values())
+        if threads:  # keep the window of the last cluster seen while it has none
+            self.workers = threads
+        elif not hasattr(self, "workers"):
+            self.workers = 1
+        self.window = 2 * self.workers
+        return threads
+
+    def submit(self, task, config_hash=None):
+        return self.client.submit(execute_batch, task, config_hash, pure=False)
 
     def finished(self, futures):
+        from concurrent.futures import CancelledError
+
         from dask.distributed import wait
 
+        if self.client.status not in ("running", "newly-created"):
+            raise Outage(f"lost the Dask scheduler at {self.address}")
         try:
-            return wait(futures, timeout=0.5, return_when="FIRST_COMPLETED").done
+            done = wait(futures, timeout=0.5, return_when="FIRST_COMPLETED").done
         except TimeoutError:
-            return set()
+            done = set()
+        except CancelledError:  # FuturesCancelledError
+            # the client cancels every future when its connection to the scheduler drops
+            raise Outage(f"lost the Dask scheduler at {self.address}") from None
+        if any(f.cancelled() for f in done):
+            # the client cancels every future when its connection to the scheduler drops
+            raise Outage(f"lost the Dask scheduler at {self.address}")
+        if time.monotonic() - self._checked > self.CHECK_EVERY:
+            self._check_workers()
+        return done
+
+    def _check_workers(self) -> None:
+        self._checked = time.monotonic()
+        try:
+            threads = self._count_workers()
+        except (OSError, TimeoutError) as exc:
+            log.debug("asking the scheduler for its workers: %s", _first_line(exc))
+            raise Outage(f"lost the Dask scheduler at {self.address}") from None
+        if threads:
+            if self._alone_since is not None:
+                log.warning("%d worker thread(s) in the cluster again", threads)
+            self._alone_since, self._seen = None, True
+            return
+        what = ("every worker left the Dask cluster at {} and none came back" if self._seen
+                else "no worker joined the Dask cluster at {}").format(self.address or "(local)")
+        if self._alone_since is None:
+            self._alone_since = time.monotonic()
+            log.warning("%s: waiting up to %g s for one", what, self.patience)
+        elif time.monotonic() - self._alone_since > self.patience:
+            raise ClusterLost(f"{what} within {self.patience:g} s")
+
+    def recover(self, outage: Outage, in_flight: int) -> None:
+        """Connect again to the scheduler's address within `patience` s (it may be
+        restarting), or raise ClusterLost."""
+        from dask.distributed import Client
+
+        if self.address is None:  # a local cluster's scheduler lives in this process
+            raise ClusterLost(f"{outage} ({in_flight} run(s) in flight not stored)")
+        log.warning("%s: waiting up to %g s for it to answer again", outage, self.patience)
+        with contextlib.suppress(Exception):
+            self.client.close(timeout=2)
+        deadline = time.monotonic() + self.patience
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise ClusterLost(f"lost the Dask scheduler at {self.address}, which did not "
+                                  f"answer again within {self.patience:g} s ({in_flight} "
+                                  "run(s) in flight were not stored)")
+            try:
+                self.client = Client(self.address, timeout=max(1.0, min(remaining, 5.0)))
+                break
+            except (OSError, TimeoutError) as exc:
+                log.debug("connecting again: %s", _first_line(exc))
+                time.sleep(min(0.5, max(0.0, deadline - time.monotonic())))
+        log.warning("connected again to the Dask scheduler at %s", self.address)
+        self._count_workers()
+        self._checked, self._alone_since = time.monotonic(), None
+
+    def outage(self, exc) -> Outage | None:
+        """An Outage if a future's failure is the lost scheduler's, not the job's."""
+        from concurrent.futures import CancelledError
+
+        from distributed.comm import CommClosedError
+
+        if (isinstance(exc, (CancelledError, CommClosedError))
+                or self.client.status not in ("running", "newly-created")):
+            return Outage(f"lost the Dask scheduler at {self.address}")
+        return None
 
     def worker_died(self, exc) -> str:
         from distributed import KilledWorker
@@ -442,9 +683,40 @@ class _DaskPool:
         return str(exc).splitlines()[0][:200] if isinstance(exc, KilledWorker) else ""
 
     def close(self, kill: bool) -> None:
-        self.client.close()
+        # a client whose scheduler is gone would wait for it for the default 30 s
+        with contextlib.suppress(Exception):
+            self.client.close(timeout=2 if kill else None)
         if self.cluster is not None:
             self.cluster.close()
+        self._quiet.restore()
+
+
+class _QuietDistributed:
+    """Dask's client logs every lost connection and every failed reconnection attempt with a
+    traceback; the sweep says what happened in one line of its own instead. With -vv
+    (rodphase at DEBUG) Dask's lines are left as they are."""
+
+    NAMES = ("distributed.client", "distributed.core", "distributed.comm", "distributed.utils",
+             "distributed.batched", "distributed.worker")
+
+    def __init__(self):
+        self.levels = {}
+        if log.getEffectiveLevel() <= logging.DEBUG:
+            return
+        for name in self.NAMES:
+            logger = logging.getLogger(name)
+            self.levels[name] = logger.level
+            logger.setLevel(logging.CRITICAL + 1)
+
+    def restore(self) -> None:
+        for name, level in self.levels.items():
+            logging.getLogger(name).setLevel(level)
+        self.levels = {}
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return (text.splitlines()[0] if text else type(exc).__name__)[:160]
 
 
 def _worker_start(parent_pid: int) -> None:
@@ -484,8 +756,9 @@ def _quiet_resource_tracker() -> None:
 
 
 @contextmanager
-def _pool(backend: str, scheduler: str | None, jobs: int) -> Iterator:
-    pool = _LocalPool(jobs) if backend == "loky" else _dask_pool(scheduler, jobs)
+def _pool(backend: str, scheduler: str | None, jobs: int,
+          patience: float = 0.0) -> Iterator:
+    pool = _LocalPool(jobs) if backend == "loky" else _dask_pool(scheduler, jobs, patience)
     clean = False
     try:
         yield pool
@@ -499,7 +772,8 @@ SCHEDULER_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx|inproc)://)?[\w.\-]+:
 SCHEDULER_TIMEOUT = 10  # s to reach a Dask scheduler before saying it cannot be reached
 
 
-def _check_backend(backend: str, scheduler: str | None) -> None:
+def _check_backend(backend: str, scheduler: str | None,
+                   reconnect_timeout: float = RECONNECT_TIMEOUT) -> None:
     """The backend and scheduler as given, checked without contacting anything."""
     if backend not in ("loky", "dask"):
         raise C.ConfigError("--backend", backend, "loky or dask")
@@ -508,9 +782,13 @@ def _check_backend(backend: str, scheduler: str | None) -> None:
     if scheduler and not SCHEDULER_ADDRESS.match(scheduler):
         raise C.ConfigError("--scheduler", scheduler,
                             "a Dask scheduler address such as tcp://host:8786")
+    if (isinstance(reconnect_timeout, bool) or not isinstance(reconnect_timeout, (int, float))
+            or not 0 <= reconnect_timeout <= MAX_RECONNECT_TIMEOUT):
+        raise C.ConfigError("--reconnect-timeout", reconnect_timeout,
+                            f"seconds from 0 to {MAX_RECONNECT_TIMEOUT}")
 
 
-def _dask_pool(scheduler: str | None, jobs: int) -> _DaskPool:
+def _dask_pool(scheduler: str | None, jobs: int, patience: float = 0.0) -> _DaskPool:
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError:
@@ -524,10 +802,10 @@ def _dask_pool(scheduler: str | None, jobs: int) -> _DaskPool:
                                 f"a Dask scheduler that answers within {SCHEDULER_TIMEOUT} s "
                                 f"(connecting failed: {str(exc).splitlines()[0][:120]})") from None
         return _DaskPool(client, None, f"on Dask at {scheduler} (dashboard "
-                         f"{client.dashboard_link or 'off'})")
+                         f"{client.dashboard_link or 'off'})", scheduler, patience)
     cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address=None)
-    return _DaskPool(Client(cluster), cluster, "on a local Dask cluster")
+    return _DaskPool(Client(cluster), cluster, "on a local Dask cluster", None, patience)
 
 
 # ---------------------------------------------------------------- signals

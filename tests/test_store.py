@@ -462,3 +462,24 @@ def test_a_stored_config_with_an_alias_bomb_is_not_expanded():
         for p, c in zip("abcdefgh", "bcdefghi"))
     assert C.stored_config(bomb) == {}  # the caption then says what it can, nothing hangs
     assert C.stored_config("scene: {scene: twist_under_load}")["scene"]["scene"] == "twist_under_load"
+
+
+def test_a_part_built_elsewhere_reads_as_one_written_here(tmp_path):
+    # a sweep's workers build each run's part (store.run_image) and the writer only writes
+    # the bytes; the run reads back the same, before and after the merge names its dimensions
+    result = fake_result("not_converged", seed=7)
+    with open_(tmp_path / "a.h5") as a, open_(tmp_path / "b.h5") as b:
+        a.write_run("r1", {"x": 1.5}, result, {"wall_time": 0.5})
+        b.write_part("r1", st.run_image("r1", {"x": 1.5}, result, {"wall_time": 0.5}, HASH))
+        for store in (a, b):
+            back = store.read_run("r1")
+            assert back.status == "not_converged" and store.run_params("r1") == {"x": 1.5}
+            assert np.array_equal(back.positions, result.positions)
+            assert np.array_equal(back.history["link"], result.history["link"])
+    with h5py.File(tmp_path / "b.h5", "r") as f:
+        run = f["runs/r1"]
+        assert run["positions"].dims[0][0].name == "/runs/r1/node"
+        assert run["history/link"].dims[0][0].name == "/runs/r1/history/time"
+        assert run["snapshots/positions"].dims[0][0].name == "/runs/r1/snapshots/time"
+    with pytest.raises(ValueError, match="run_id"):
+        st.run_image("a/b", {}, result, {}, HASH)

@@ -323,3 +323,78 @@ def test_jobs_start_longest_first_and_equal_ones_in_sampling_order(tmp_path):
     broken = plan(sweep, scene)[0]
     broken.scene = {"scene": "no such scene"}
     assert longest_first(jobs + [broken])[0] is broken
+
+
+class _FakePool:
+    """A pool that runs tasks in this process and can lose its scheduler or its workers."""
+
+    def __init__(self, outages=0, die_on_batches=0):
+        from concurrent.futures import Future
+
+        self.Future = Future
+        self.workers, self.window = 2, 4
+        self.outages, self.die_on_batches = outages, die_on_batches
+        self.submitted, self.recovered = [], 0
+
+    def submit(self, task, config_hash=None):
+        from concurrent.futures.process import BrokenProcessPool
+
+        from test_store import fake_result
+
+        from rodphase.store import run_image
+        from rodphase.sweep import Prepared
+
+        self.submitted.append([rid for job in task for rid in job.run_ids])
+        future = self.Future()
+        if len(task) > 1 and self.die_on_batches:
+            self.die_on_batches -= 1
+            future.set_exception(BrokenProcessPool("a worker died"))
+            return future
+        out = []
+        for job in task:
+            result = fake_result(seed=len(self.submitted))
+            result.diagnostics["wall_time"] = 0.001
+            out.append((job.run_ids[0], job.params[0],
+                        Prepared("ok", "completed", 0.001,
+                                 run_image(job.run_ids[0], job.params[0], result, {},
+                                           config_hash)), ""))
+        future.set_result(out)
+        return future
+
+    def finished(self, futures):
+        from rodphase.sweep import Outage
+
+        if self.outages:
+            self.outages -= 1
+            raise Outage("lost the Dask scheduler at tcp://127.0.0.1:1")
+        return set(futures)
+
+    def outage(self, exc):
+        return None
+
+    def worker_died(self, exc):
+        return "a worker died" if "worker died" in str(exc) else ""
+
+    def recover(self, outage, in_flight):
+        self.recovered += 1
+
+
+@pytest.mark.parametrize("outages, die_on_batches", [(0, 0), (2, 0), (0, 2)])
+def test_runs_in_flight_at_an_outage_or_a_death_are_sent_again_and_counted_once(
+        tmp_path, outages, die_on_batches):
+    from rodphase.store import open_store
+    from rodphase.sweep import Job, SweepReport, _run_jobs
+
+    jobs = [Job([f"run-{i:05d}"], [{"twist_density": i / 100}], {"rod": {"elements": 6}})
+            for i in range(60)]
+    pool = _FakePool(outages, die_on_batches)
+    report = SweepReport(60, 0, 0, 0, 0.0, [])
+    with open_store(tmp_path / "o.h5", config_text="x", config_hash="h" * 16, version="t",
+                    kind="sweep") as store:
+        _run_jobs(store, jobs, pool, False, report)
+        assert sorted(store.run_ids()) == [j.run_ids[0] for j in jobs]
+    assert report.done == 60 and report.failed == 0 and pool.recovered == outages
+    sizes = [len(task) for task in pool.submitted]
+    assert max(sizes) > 1  # fast runs went several to a task once seen to be fast
+    sent = [rid for task in pool.submitted for rid in task]
+    assert len(sent) > 60 if (outages or die_on_batches) else len(sent) == 60
