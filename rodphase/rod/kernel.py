@@ -1404,8 +1404,14 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             residual = res / force_scale
             kinetic = kin / (force_scale * length_scale)
             if record:
+                # the row's kinetic energy from the inlined sum, not from _guards' kin: the
+                # copy of _guards a process that loads advance from the cache calls sums it in
+                # another order than the one a compiling process calls (up to 1.4e-14 J apart
+                # on a 2-core AMD EPYC, tests/test_kernel_cache.py); advance's own code is the
+                # same in both
                 _record(rows, x, v, Q, w, force, dt, t_next, u.end_force, force_dir, axis,
-                        end_position, tables, clamp_torque, energies, 0.5 * (kin + kinetic_before),
+                        end_position, tables, clamp_torque, energies,
+                        0.5 * (_kinetic_energy(v, w, node_mass, inertia, r2) + kinetic_before),
                         touching, worst, residual, f_stiff, f_radius, contact_energy, out)
                 rows += 1
 
@@ -1461,7 +1467,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 # the hold's end is a row too (the state is at t itself: no half step to add),
                 # or a hold shorter than a history interval would leave no row at all
                 _record(rows, x, v, Q, w, force, 0.0, t, u.end_force, force_dir, axis,
-                        end_position, tables, clamp_torque, energies, kin, touching, worst,
+                        end_position, tables, clamp_torque, energies,
+                        _kinetic_energy(v, w, node_mass, inertia, r2), touching, worst,
                         residual, f_stiff, f_radius, contact_energy, out)
                 rows += 1
             break
