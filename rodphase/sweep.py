@@ -803,9 +803,18 @@ def _dask_pool(scheduler: str | None, jobs: int, patience: float = 0.0) -> _Dask
                                 f"(connecting failed: {str(exc).splitlines()[0][:120]})") from None
         return _DaskPool(client, None, f"on Dask at {scheduler} (dashboard "
                          f"{client.dashboard_link or 'off'})", scheduler, patience)
+    try:  # the dashboard's plotting library: Dask's optional dependency, not rodphase's
+        import bokeh  # noqa: F401
+
+        dashboard = "127.0.0.1:0"  # a free port on loopback
+    except ImportError:
+        dashboard = None
     cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None)
-    return _DaskPool(Client(cluster), cluster, "on a local Dask cluster", None, patience)
+                           host="127.0.0.1", dashboard_address=dashboard)
+    client = Client(cluster)
+    link = client.dashboard_link if dashboard else "off: pip install bokeh for one"
+    return _DaskPool(client, cluster, f"on a local Dask cluster (dashboard {link})", None,
+                     patience)
 
 
 # ---------------------------------------------------------------- signals
