@@ -343,10 +343,10 @@ def compile_kernel() -> float:
     started afterwards load it instead of each compiling the same kernel at once (the first
     sweep on a fresh install spent most of its time so).
 
-    On an empty cache the topology (about a fifth of the compiling) compiles in a second
-    process meanwhile, into the same disk cache, and loads from there when the tiny run
-    needs it: the kernel is one function and compiles on one core, so the other one would
-    otherwise wait."""
+    On an empty cache the topology (about a fifth of the compiling) and the static functions
+    of the hold's stability test (rod/onset.compile_static) compile in a second process
+    meanwhile, into the same disk cache, and load from there when needed: the kernel is one
+    function and compiles on one core, so the other one would otherwise wait."""
     import subprocess
     import sys
     from pathlib import Path
@@ -360,7 +360,8 @@ def compile_kernel() -> float:
         try:
             helper = subprocess.Popen(
                 [sys.executable, "-c", f"import sys; sys.path.insert(0, {root!r}); "
-                 "from rodphase.topology import compile_history; compile_history()"],
+                 "from rodphase.topology import compile_history; compile_history(); "
+                 "from rodphase.rod.onset import compile_static; compile_static()"],
                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         except OSError:  # no second process here: the topology compiles below, in this one
             helper = None

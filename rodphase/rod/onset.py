@@ -191,3 +191,18 @@ def greenhill_turns(rod: Rod, extension: float) -> float:
     tension = rod.axial_stiffness * (1.0 - 1.0 / extension)
     return stretched_greenhill_turns(tension, extension, rod.length, rod.bending_stiffness,
                                      rod.twist_stiffness)
+
+
+def compile_static() -> None:
+    """Compile the static functions a hold's stability test, the straight start and the
+    phase map's onset line call (and write them to numba's disk cache), on a tiny rod: what
+    runner.compile_kernel's second process runs while the kernel compiles, so that a sweep's
+    workers load them instead of each compiling them at its first hold."""
+    from .simulate import static_model_of
+
+    branch = StraightBranch(Rod(length=1.0, radius=0.025, elements=8), 1.05)
+    problem = branch.problem(0.5)
+    model = static_model_of(problem)
+    static.stability(model, problem.state.x, problem.state.Q)
+    branch.stable(0.5)
+    static.solve(model, problem.state.x, problem.state.Q, force_scale=1.0, max_iterations=1)
