@@ -45,15 +45,6 @@ def reports_errors(func):
     return wrapper
 
 
-def _make_parent(output: str) -> None:
-    # `-o out/run.h5` on a fresh checkout: make `out/` rather than fail in h5py/matplotlib
-    try:
-        Path(output).parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise C.ConfigError("--output", output, f"a path whose folder exists or can be made "
-                            f"({exc.strerror}: {exc.filename})") from None
-
-
 def _overrides(items) -> list:
     return [C.parse_override(item) for item in items]
 
@@ -119,7 +110,7 @@ def run(scene, output, sets, force):
     from .tabulate import classify_store
 
     check_memory(cfg)  # a run whose snapshots cannot fit is refused before it costs anything
-    _make_parent(output)
+    C.make_output_folder(output)
     # the output is opened (locked, its config checked) before simulating: a run that cannot
     # be written is refused before it costs anything
     with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
@@ -290,7 +281,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     counts = table["phase"].value_counts().to_dict()
     click.echo(f"{len(table)} runs: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     if csv_path:
-        _make_parent(csv_path)
+        C.make_output_folder(csv_path)
         write_table_csv(table, csv_path)
         click.echo(f"table written to {csv_path} (units and meanings of its columns in "
                    f"{csv_path}-metadata.json)")
@@ -338,7 +329,7 @@ def plot(store_file, kind, output, run_id, experiments, twist, background, size,
       rodphase plot out/quick.h5 --kind phase --size column -o phase.pdf
       rodphase plot out/quick.h5 --kind topology --run run-00003 -o lk.png
     """
-    _make_parent(output)
+    C.make_output_folder(output)
     if size is not None and size not in ("column", "page"):
         try:
             width, height = (float(v) for v in size.split(","))
@@ -470,7 +461,7 @@ def movie(store_file, run_id, output, fps, height):
         # writing a GIF under another name (or beside it) would surprise: say it instead
         raise C.ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
                             "installed (apt install ffmpeg, conda install ffmpeg)")
-    _make_parent(output)
+    C.make_output_folder(output)
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
     from .analysis import twist_density
@@ -502,7 +493,7 @@ def export(store_file, run_id, output, snapshots):
     from .export import write_vtk, write_vtk_series
     from .store import read_store
 
-    _make_parent(output)
+    C.make_output_folder(output)
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
     if snapshots:

@@ -557,6 +557,16 @@ def _yaml(text: str):
     return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
 
 
+def make_output_folder(output) -> None:
+    """`-o out/x.h5` on a fresh checkout: make `out/` rather than fail in h5py or matplotlib;
+    a folder that cannot be made is refused as the option --output."""
+    try:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--output", str(output), f"a path whose folder exists or can be made "
+                          f"({exc.strerror}: {exc.filename})") from None
+
+
 def stored_config(text: str) -> dict:
     """The resolved config a store carries (its config_yaml attribute), read with the same
     strict loader as config files (a file from elsewhere may hold an alias bomb); {} when it

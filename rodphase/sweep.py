@@ -21,7 +21,6 @@ import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -305,7 +304,7 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
             with contextlib.ExitStack() as stack:
                 pool = (stack.enter_context(_pool(backend, scheduler, jobs, reconnect_timeout))
                         if scheduler else None)
-                _make_folder(out_path)
+                C.make_output_folder(out_path)
                 # the lock and the config check come next: a second writer or another
                 # config's file is refused before anything is compiled or simulated
                 store = stack.enter_context(open_store(
@@ -335,15 +334,6 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
             pass
         report.stopped_by = stop.signal_name
     return report
-
-
-def _make_folder(out_path: str) -> None:
-    """`-o out/x.h5` on a fresh checkout: make `out/` rather than fail in h5py."""
-    try:
-        Path(out_path).parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise C.ConfigError("--output", out_path, f"a path whose folder exists or can be made "
-                            f"({exc.strerror}: {exc.filename})") from None
 
 
 def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path):
