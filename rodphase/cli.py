@@ -393,9 +393,9 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                 from .tabulate import onset_lines
 
                 e = table["extension"].astype(float)
-                # 41 points: the line is concave, and a coarse polyline would cut below it
-                lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 40
-                                             for i in range(41)])
+                # 13 points (an onset each): phase_map draws a spline through them
+                lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12
+                                             for i in range(13)])
             P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
                         onset=lines)
         elif kind == "path":

@@ -239,8 +239,8 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
             for column, style, label in (
                     ("model", "-", "onset, model" + (f" n = {n}" if n else "")),
                     ("greenhill", "--", "Greenhill, unsheared")):
-                handles += ax.plot(onset["extension"], onset[f"{column}_{reading}"], style,
-                                   color="0.15", lw=1.0, zorder=1, label=label)
+                handles += ax.plot(*_smooth(onset["extension"], onset[f"{column}_{reading}"]),
+                                   style, color="0.15", lw=1.0, zorder=1, label=label)
 
         ax.set_ylabel(TWIST_DENSITY_LABEL if twist != "phi_a_current" else
                       r"twist density $\Phi a$ of the stretched rod (rad)")
@@ -269,6 +269,19 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
             fig.supxlabel("\n".join(textwrap.wrap(caption, width)), fontsize=6.5, color="0.3",
                           ha="center")
         return _done(fig, path)
+
+
+def _smooth(x, y, points: int = 200):
+    """A cubic spline through the finite (x, y) (a line known at a few points: its chords
+    would cut inside a curved line), or the points themselves when there are too few."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    keep = np.isfinite(x) & np.isfinite(y)
+    if keep.sum() < 4:
+        return x[keep], y[keep]
+    from scipy.interpolate import CubicSpline
+
+    fine = np.linspace(x[keep].min(), x[keep].max(), points)
+    return fine, CubicSpline(x[keep], y[keep])(fine)
 
 
 def phase_path(paths: dict[str, pd.DataFrame], path=None, *,

@@ -157,7 +157,7 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
     buckling twist (rod/onset.py: the perfect rod at this resolution, with its shear and
     stretch), or by the first target if that is less; the clamp reference is the untwisted
     frame, so that the end rotation control carries the turns already in."""
-    from .rod.onset import straight_equilibrium, straight_onset_turns
+    from .rod.onset import straight_equilibrium, straight_start_turns
 
     e = cfg.ends
     needs = {"ends.start": (e.start, "clamped"), "ends.end_axial": (e.end_axial, "force"),
@@ -178,13 +178,11 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
         raise C.ConfigError("physics.gravity", list(cfg.physics.gravity),
                             "[0, 0, 0] with loading.quasi_static_below > 0")
     extension = C.straight_extension(cfg)
-    # 1e-4 of the onset is far inside the margin 1 - fraction >= 0.05, at a third of the cost
     try:
-        onset = straight_onset_turns(rod, extension, tolerance=1e-4)
+        turns = straight_start_turns(rod, extension, first_target, fraction)
     except ValueError as error:  # under-resolved for the onset's twist
         raise C.ConfigError("rod.elements", rod.elements,
                             f"{error}, with loading.quasi_static_below > 0") from None
-    turns = math.copysign(min(abs(first_target), fraction * onset), first_target)
     # along the axis from the origin, every element stretched to the load's extension e; the
     # clamp reference is the untwisted straight rod's frame (all its frames are alike, and so
     # are the frames clamp_frames would extrapolate from them)

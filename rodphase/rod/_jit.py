@@ -28,7 +28,7 @@ for _option in LLVM_OPTIONS:
 # hash of all of them instead (tests/test_kernel_cache.py). result.py holds the history
 # table the kernel's slot indices come from. Paths are relative to the package.
 KERNEL_MODULES = ("rod/_jit.py", "rod/kernel.py", "rod/contact.py", "rod/rotation.py",
-                  "rod/neo_hookean.py", "result.py")
+                  "rod/neo_hookean.py", "rod/static.py", "result.py")
 
 
 def _kernel_source_hash() -> str:

@@ -138,30 +138,32 @@ class StraightBranch:
                                              select="i", select_range=(0, 0),
                                              check_finite=False)[0])
 
-    def _resolved(self, turns: float, guess: float) -> None:
-        """Refuse twists that turn neighbouring elements by more than 160°: the matrix log's
-        branch cut is at 180°, and no stiffness found that close to it means anything (the
-        kernel's own resolution guard stops a run at 135°)."""
-        limit = 8.0 * math.pi / 9.0
-        if TURN * turns / self.rod.elements > limit:
-            needed = math.ceil(TURN * turns / limit)
-            raise ValueError(f"at least {needed} elements: the onset's twist (about "
-                             f"{guess:.3g} turns at L/L0 = {self.extension:g}) would turn "
-                             f"neighbouring elements of {self.rod.elements} by more than 160°")
+    def _limit_turns(self) -> float:
+        """The most twist [turns] this resolution can answer for: neighbouring elements
+        turned by 160°. The matrix log's branch cut is at 180°, and no stiffness found that
+        close to it means anything (the kernel's own resolution guard stops a run at 135°)."""
+        return (8.0 * math.pi / 9.0) * self.rod.elements / TURN
 
     def onset_turns(self, tolerance: float = 1e-6) -> float:
         """θ_c [turns], relative accuracy `tolerance`: bisection on the Cholesky test (a
         factorization costs a twentieth of an eigenvalue; the stiffness dominates)."""
         # bracketed around the unsheared clamped Greenhill twist: the model's onset lies at
-        # 0.85-0.97 of it for the paper's rod (shear), and the bracket widens for any other
+        # 0.6-0.97 of it for the paper's rod (shear), and the bracket widens for any other,
+        # up to the twist this resolution can answer for
         guess = greenhill_turns(self.rod, self.extension)
-        self._resolved(1.05 * guess, guess)
-        lo, hi = 0.7 * guess, 1.05 * guess
+        limit = self._limit_turns()
+        hi = min(1.05 * guess, limit)
+        lo = 0.7 * guess if 0.7 * guess < hi else 0.5 * hi
         while not self.stable(lo):
             lo, hi = 0.5 * lo, lo
         while self.stable(hi):
-            lo, hi = hi, 1.5 * hi
-            self._resolved(hi, guess)
+            if hi >= limit:
+                needed = math.ceil(TURN * 1.05 * guess / (8.0 * math.pi / 9.0))
+                raise ValueError(
+                    f"at least {needed} elements: still stable at {limit:.3g} turns (160° "
+                    f"between neighbouring elements of {self.rod.elements}), below the onset's "
+                    f"twist (about {guess:.3g} turns unsheared) at L/L0 = {self.extension:g}")
+            lo, hi = hi, min(1.5 * hi, limit)
         while hi - lo > tolerance * hi:
             mid = 0.5 * (lo + hi)
             if self.stable(mid):
@@ -169,6 +171,23 @@ class StraightBranch:
             else:
                 hi = mid
         return 0.5 * (lo + hi)
+
+
+def straight_start_turns(rod: Rod, extension: float, target: float, fraction: float, *,
+                         ends: Ends = LOADED_ENDS) -> float:
+    """The twist [turns] a run started on the straight branch starts at: `target`, or
+    `fraction` of the onset θ_c if that is less (with the target's sign). A target whose
+    straight rod is still stable at target/fraction needs no θ_c (target < fraction·θ_c
+    then): one test, and none at all for no twist, so that a rod too coarse to resolve its
+    onset can still start a small twist."""
+    if target == 0.0:
+        return 0.0
+    branch = StraightBranch(_perfect(rod), extension, ends)
+    above = abs(target) / fraction
+    if above <= branch._limit_turns() and branch.stable(above):
+        return target
+    onset = branch.onset_turns(1e-4)
+    return math.copysign(min(abs(target), fraction * onset), target)
 
 
 def straight_onset_turns(rod: Rod, extension: float, *, ends: Ends = LOADED_ENDS,
