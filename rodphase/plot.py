@@ -276,12 +276,14 @@ def _smooth(x, y, points: int = 200):
     would cut inside a curved line), or the points themselves when there are too few."""
     x, y = np.asarray(x, float), np.asarray(y, float)
     keep = np.isfinite(x) & np.isfinite(y)
-    if keep.sum() < 4:
-        return x[keep], y[keep]
+    x, first = np.unique(x[keep], return_index=True)  # a one-load sweep: one x, many times
+    y = y[keep][first]
+    if len(x) < 4:
+        return x, y
     from scipy.interpolate import CubicSpline
 
-    fine = np.linspace(x[keep].min(), x[keep].max(), points)
-    return fine, CubicSpline(x[keep], y[keep])(fine)
+    fine = np.linspace(x[0], x[-1], points)
+    return fine, CubicSpline(x, y)(fine)
 
 
 def phase_path(paths: dict[str, pd.DataFrame], path=None, *,
