@@ -235,3 +235,11 @@ def test_a_coarse_sweeps_map_leaves_out_the_onset_it_cannot_resolve():
     lines = onset_lines({"scene": scene}, [1.02, 1.3])
     assert np.isfinite(lines["model_rest"].iloc[0]) and np.isnan(lines["model_rest"].iloc[1])
     assert np.isfinite(lines["greenhill_rest"]).all()
+
+
+def test_a_rod_compressed_past_euler_has_no_onset_and_says_so():
+    # compressed to L/L0 = 0.99 (a plain quadratic rod: E·A0·0.01 = 19.6 N against the
+    # clamped Euler load 4π²B/L² = 12.1 N) it buckles untwisted: refused, not looped on
+    with pytest.raises(ValueError, match="unstable without twist"):
+        onset.straight_onset_turns(Rod(length=L0, radius=A0, elements=20, incompressible=False),
+                                   0.99)

@@ -155,6 +155,9 @@ class StraightBranch:
         hi = min(1.05 * guess, limit)
         lo = 0.7 * guess if 0.7 * guess < hi else 0.5 * hi
         while not self.stable(lo):
+            if lo < 1e-6 * guess:  # unstable untwisted (compressed past Euler): no onset
+                raise ValueError(f"the straight rod is unstable without twist at L/L0 = "
+                                 f"{self.extension:g}")
             lo, hi = 0.5 * lo, lo
         while self.stable(hi):
             if hi >= limit:
