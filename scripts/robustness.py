@@ -970,6 +970,16 @@ def case_second_writer(lab: Lab, locking: bool = True) -> list[Outcome]:
     return [o]
 
 
+def _readers_at_once(lab: Lab, d: Path, commands: dict) -> list:
+    """Start every CLI command of `commands` (name -> arguments) at once in the background,
+    as a user watching a sweep would, wait for all (120 s each) and return their results."""
+    readers = [lab.background(lab.cli(*args), name, workdir=d) for name, args in commands.items()]
+    for r in readers:
+        r.wait(120)
+        r.cleanup()
+    return [r.result() for r in readers]
+
+
 def case_reader_during_sweep(lab: Lab) -> list[Outcome]:
     """While a sweep writes OUT, classify --csv and plot --kind shape of OUT (at once) exit
     0 without a Traceback and write their files; the sweep's store ends complete."""
@@ -979,17 +989,12 @@ def case_reader_during_sweep(lab: Lab) -> list[Outcome]:
     d, out, bg, problems = _running_sweep(lab, "reader-during-sweep", None)
     if not problems:
         csv, png = d / "x.csv", d / "x.png"
-        readers = [lab.background(lab.cli("classify", out, "--csv", csv), "classify", workdir=d),
-                   lab.background(lab.cli("plot", out, "--kind", "shape", "-o", png), "plot",
-                                  workdir=d)]
-        for r in readers:
-            r.wait(120)
-            r.cleanup()
+        readers = _readers_at_once(lab, d, {"classify": ("classify", out, "--csv", csv),
+                                            "plot": ("plot", out, "--kind", "shape", "-o", png)})
         if bg.proc.poll() is not None:
             problems.append("inconclusive: the sweep ended before the readers did (make the "
                             "sweep longer)")
-        for what, r, path in (("classify", readers[0], csv), ("plot", readers[1], png)):
-            res = r.result()
+        for what, res, path in (("classify", readers[0], csv), ("plot", readers[1], png)):
             p = output_problems(res, rc=0, one_error=False)
             if res.rc == 0 and not (path.exists() and path.stat().st_size):
                 p.append(f"wrote no {path.name}")
@@ -1160,18 +1165,14 @@ def case_plot_phase_while_written(lab: Lab) -> list[Outcome]:
         # _running_sweep waited for a stored run; both readers at once, as a user watching a
         # sweep would (one after the other they outlasted the sweep's ~10 s)
         png = d / "phase.png"
-        readers = [lab.background(lab.cli("plot", out, "--kind", "phase", "-o", png), "plot",
-                                  workdir=d),
-                   lab.background(lab.cli("classify", out), "classify", workdir=d)]
-        for r in readers:
-            r.wait(120)
-            r.cleanup()
-        res = readers[0].result()
+        readers = _readers_at_once(lab, d, {"plot": ("plot", out, "--kind", "phase", "-o", png),
+                                            "classify": ("classify", out)})
+        res = readers[0]
         p = output_problems(res, rc=0, one_error=False)
         if res.rc == 0 and not (png.exists() and png.stat().st_size):
             p.append("wrote no phase.png")
         problems += [f"plot: {x}" for x in p]
-        res = readers[1].result()
+        res = readers[1]
         p = output_problems(res, rc=0, one_error=False)
         if not re.search(r"^\d+ runs: ", res.out, re.M):
             p.append("printed no table summary")
