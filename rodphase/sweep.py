@@ -409,7 +409,13 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
             for future in done:
                 task = running.pop(future)
                 try:
-                    arrived = future.result()
+                    arrived = pool.result(future)
+                except ClusterLost:
+                    raise
+                except Outage as exc:  # the scheduler went while the result was fetched
+                    outage = exc
+                    running[future] = task
+                    break
                 except Exception as exc:
                     outage = pool.outage(exc)
                     if outage:  # not the task's failure: the scheduler went as it arrived
@@ -528,6 +534,9 @@ class _LocalPool:
         # a timeout keeps the parent responsive to signals while the workers compute
         return wait(futures, timeout=0.5, return_when=FIRST_COMPLETED).done
 
+    def result(self, future):
+        return future.result()
+
     def outage(self, exc) -> Outage | None:
         return None  # the workers are this process's children: there is no connection to lose
 
@@ -564,11 +573,13 @@ class _DaskPool:
     again to the same address) and a cluster whose workers all left, for `patience` s each."""
 
     CHECK_EVERY = 2.0  # s between asking the scheduler how many workers it has
+    RESULT_SLICE, MAX_RESULT_SLICE = 1.0, 30.0  # s a result's fetch waits before a check
 
     def __init__(self, client, cluster, where: str, address: str | None = None,
                  patience: float = 0.0):
         self._quiet = _QuietDistributed()
         self.client, self.cluster, self.where = client, cluster, where
+        _drop_cut_gathers(client)
         self.address, self.patience = address, patience
         self._seen = self._count_workers() > 0  # a worker was there at some time
         self._checked = time.monotonic()
@@ -607,6 +618,21 @@ class _DaskPool:
         if time.monotonic() - self._checked > self.CHECK_EVERY:
             self._check_workers()
         return done
+
+    def result(self, future):
+        """A finished future's runs. Its data lives on the worker that ran it: if that worker
+        leaves before the data is fetched, the scheduler runs the task again and the fetch
+        waits for it, for ever if no worker is left. So the fetch is retried in slices, the
+        workers counted in between (ClusterLost once none came back within `patience` s);
+        a slice grows each time, so that a large result on a slow link still arrives."""
+        wait_for = self.RESULT_SLICE
+        while True:
+            try:
+                return future.result(timeout=wait_for)
+            except TimeoutError:
+                log.debug("the result of %s not fetched within %g s", future.key, wait_for)
+                self._check_workers()
+                wait_for = min(2 * wait_for, self.MAX_RESULT_SLICE)
 
     def _check_workers(self) -> None:
         self._checked = time.monotonic()
@@ -652,6 +678,7 @@ class _DaskPool:
                 log.debug("connecting again: %s", _first_line(exc))
                 time.sleep(min(0.5, max(0.0, deadline - time.monotonic())))
         log.warning("connected again to the Dask scheduler at %s", self.address)
+        _drop_cut_gathers(self.client)
         self._count_workers()
         self._checked, self._alone_since = time.monotonic(), None
 
@@ -702,6 +729,22 @@ class _QuietDistributed:
         for name, level in self.levels.items():
             logging.getLogger(name).setLevel(level)
         self.levels = {}
+
+
+def _drop_cut_gathers(client) -> None:
+    """A result fetch that timed out (_DaskPool.result) leaves the client's inner gather
+    waiting; when the client closes, that gather ends with Dask's AllExit, which nobody
+    awaits any more, and asyncio would log it with a traceback after the sweep's last line.
+    Those, and only those, are dropped on the client's event loop."""
+    from distributed.client import AllExit
+
+    loop = client.loop.asyncio_loop
+
+    def handler(loop, context):
+        if not isinstance(context.get("exception"), AllExit):
+            loop.default_exception_handler(context)
+
+    loop.set_exception_handler(handler)
 
 
 def _first_line(exc: BaseException) -> str:

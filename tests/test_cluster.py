@@ -208,10 +208,6 @@ def test_a_worker_that_leaves_mid_run_has_its_runs_redone_elsewhere(cluster, tmp
     assert stored(out) == [f"run-{i:05d}" for i in range(samples)]
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "known race (found 2026-12-04 on a fresh-clone CI check, 1 run in 4): when the worker dies "
-    "while the client gathers its batch, the sweep takes it for a lost scheduler, waits the "
-    "reconnect timeout and then hangs instead of saying every worker left; issue #31"))
 def test_a_cluster_whose_workers_all_left_stops_with_one_line(cluster, tmp_path):
     out = tmp_path / "out.h5"
     cluster.scheduler()
@@ -229,6 +225,34 @@ def test_a_cluster_whose_workers_all_left_stops_with_one_line(cluster, tmp_path)
     last = text.strip().splitlines()[-1]
     assert last.startswith("stopped: every worker left the Dask cluster at " + cluster.address)
     assert f"{len(stored(out))} of 40 runs are stored" in last
+
+
+def test_a_result_whose_worker_left_before_it_was_fetched_is_not_waited_for_ever(cluster):
+    # the race behind a sweep that hung (1 fresh-clone CI run in 4): the task finished, its
+    # worker was killed before the client fetched the data, the scheduler queued the task
+    # again with no worker to run it, and Future.result() waited for ever
+    from dask.distributed import Client, wait
+
+    from rodphase.sweep import ClusterLost, _DaskPool
+
+    cluster.scheduler()
+    worker = cluster.worker()
+    client = Client(cluster.address, timeout=30)
+    wait_for(lambda: client.scheduler_info()["workers"], 30, "a worker joined")
+    pool = _DaskPool(client, None, "test", cluster.address, patience=1.0)
+    try:
+        future = client.submit(sum, [1, 2], pure=False)
+        wait([future], timeout=30)
+        assert future.status == "finished"
+        cluster.kill(worker)
+        start = time.time()
+        with pytest.raises(ClusterLost, match="every worker left the Dask cluster at "
+                           + cluster.address + " and none came back within 1 s"):
+            pool.result(future)
+        # the worker is seen gone within a result slice or two, then 1 s of patience
+        assert time.time() - start < 15
+    finally:
+        pool.close(kill=True)
 
 
 @pytest.mark.parametrize("args, words", [

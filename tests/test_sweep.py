@@ -369,6 +369,9 @@ class _FakePool:
             raise Outage("lost the Dask scheduler at tcp://127.0.0.1:1")
         return set(futures)
 
+    def result(self, future):
+        return future.result()
+
     def outage(self, exc):
         return None
 
