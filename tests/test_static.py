@@ -68,3 +68,87 @@ def test_a_disturbed_twisted_rod_below_its_onset_returns_to_the_straight_branch(
     assert solution.success, solution.message
     assert np.abs(solution.x - x).max() < 1e-9
     assert np.abs(solution.Q - Q).max() < 1e-9
+
+
+def coil_in_contact(n: int = 48, pitch_over_diameter: float = 0.97):
+    """A clamped, loaded rod laid as a three-loop helix whose pitch is 3 % short of touching
+    (neighbouring loops overlap by about 3 % of the diameter): a state in self-contact built
+    without the kernel. Returns (problem, static model with contact)."""
+    from rodphase.rod.model import Contact, state_from
+    from rodphase.scenes import helix_state
+
+    a = 0.01
+    x, directors, length = helix_state(0.05, pitch_over_diameter * 2 * a, 3.0, n, 1, 0.0)
+    rod = Rod(length=length, radius=a, elements=n)
+    state = state_from(x, directors)
+    problem = Problem(rod=rod, state=state, ends=LOADED_ENDS,
+                      controls=Controls(end_force=constant(rod.buckling_force)),
+                      contact=Contact(enabled=True))
+    return problem, static_model_of(problem, contact=True)
+
+
+def test_self_contact_at_rest_is_the_kernels_pair_law_and_conserves_momentum():
+    # neighbouring loops overlap: the forces are the pair springs k·δ (no dashpot, no
+    # friction at rest); they are internal, so they sum to zero force and zero moment about
+    # the origin (to round-off of the largest force: 1e-12)
+    problem, model = coil_in_contact()
+    force = static.contact_force(model, problem.state.x)
+    largest = np.linalg.norm(force, axis=0).max()
+    assert largest > 0.01 * problem.rod.buckling_force  # the loops do press on each other
+    assert np.abs(force.sum(axis=1)).max() < 1e-12 * largest * problem.rod.elements
+    moment = np.cross(problem.state.x.T, force.T).sum(axis=0)
+    assert np.abs(moment).max() < 1e-12 * largest * problem.rod.length * problem.rod.elements
+    # without contact the static model sees none of it
+    plain = static.loads(static_model_of(problem), problem.state.x, problem.state.Q)
+    touched = static.loads(model, problem.state.x, problem.state.Q)
+    assert np.abs(touched - plain).max() > 0.01 * problem.rod.buckling_force
+
+
+def test_the_stiffness_with_contact_matches_plain_central_differences_of_the_loads():
+    # the contact columns are coloured (nodes that reach no common node are perturbed
+    # together) and the rod's are banded: together they must equal one column at a time of
+    # the loads with contact, up to the differences' round-off (1e-9 of the largest entry)
+    problem, model = coil_in_contact(n=36)
+    x, Q = problem.state.x, problem.state.Q
+    K = static.stiffness_matrix(model, x, Q)
+    pairs = static.candidate_pairs(model, x)
+    N, m = model.unknowns, model.positions
+    plain = np.empty((N, N))
+    for j in range(N):
+        du = np.zeros(N)
+        du[j] = 1e-6 * model.length_scale if j < m else 1e-6
+        xp, Qp = static.step_along(model, x, Q, du)
+        xm, Qm = static.step_along(model, x, Q, -du)
+        plain[:, j] = -(static.loads(model, xp, Qp, pairs)
+                        - static.loads(model, xm, Qm, pairs)) / (2 * du[j])
+    contact = static.contact_stiffness(model, x)
+    assert np.abs(contact).max() > 0.01 * np.abs(plain).max()  # contact is a large part
+    assert np.abs(K - plain).max() < 1e-9 * np.abs(plain).max()
+
+
+def test_a_solenoid_the_kernel_settled_is_an_equilibrium_of_the_static_loads_with_contact():
+    # Fig 2b's solenoid at 64 elements, held until the kernel's equilibrium test passed: the
+    # static loads of its final state (self-contact included) are the residual the kernel
+    # measured there (the same pieces composed; 1 % covers the kernel taking it at its last
+    # check, up to 50 steps before the end), and without contact they would not be
+    from rodphase import config as C
+    from rodphase.rod.simulate import force_scale
+    from rodphase.runner import run
+    from rodphase.scenes import SCENES, build
+
+    overrides = [("rod.elements", 64), ("loading.force_multiple", 90),
+                 ("loading.twist_density", 1.55), ("loading.twist_rate", 1.0),
+                 ("solver.hold_max_time", 8.0)]
+    problem = build(C.load_scene("twist_under_load", overrides, SCENES))
+    result = run(problem)
+    assert result.status == "ok", result.message
+    model = static_model_of(problem, controls=problem.stages[-1].controls, contact=True)
+    x = np.ascontiguousarray(result.positions.T)
+    Q = np.ascontiguousarray(np.transpose(result.directors, (1, 2, 0)))
+    scale = force_scale(problem)
+    measured = result.history["residual"][-1]
+    static_residual = static.residual_norm(model, static.loads(model, x, Q)) / scale
+    assert result.history["contacts"][-1] > 10
+    assert abs(static_residual - measured) < 0.01 * measured, (static_residual, measured)
+    no_contact = static_model_of(problem, controls=problem.stages[-1].controls)
+    assert static.residual_norm(no_contact, static.loads(no_contact, x, Q)) / scale > 0.1

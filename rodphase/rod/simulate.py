@@ -169,10 +169,12 @@ def control_values(controls: Controls, t: float, shift: float = 0.0) -> np.ndarr
 
 
 def static_model_of(problem: Problem, controls: Controls | None = None, time: float = math.inf,
-                    ends: Ends | None = None, shift: float = 0.0) -> static.StaticModel:
+                    ends: Ends | None = None, shift: float = 0.0,
+                    contact: bool = False) -> static.StaticModel:
     """The static view (rod/static.py) of `problem` under `controls` (default the problem's)
     at `time` (default: their final values), with its ends (default the problem's), the same
-    rod arrays and boundary the kernel gets."""
+    rod arrays and boundary the kernel gets; with `contact`, its self-contact too (if the
+    problem has it enabled) as the kernel's settings give it."""
     controls = controls if controls is not None else problem.controls
     ends = ends if ends is not None else problem.ends
     n = problem.rod.elements
@@ -184,7 +186,10 @@ def static_model_of(problem: Problem, controls: Controls | None = None, time: fl
     rod = k.RodProperties(local_mask=_local_mask(n, controls.segment), **_rod_arrays(problem))
     return static.static_model(rod, boundary, control_values(controls, time, shift),
                                incompressible=settings.incompressible,
-                               neo_hookean=problem.rod.law != "paper")
+                               neo_hookean=problem.rod.law != "paper",
+                               contact=contact and problem.contact.enabled,
+                               fold=settings.fold, exclusion=settings.exclusion,
+                               skin=settings.skin)
 
 
 def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:

@@ -4,8 +4,22 @@ A state (x, Q) of a Problem at given control values is an equilibrium when the l
 explicit kernel would compute for it at rest (v = w = 0) vanish on its free degrees of
 freedom. `loads_at_rest` composes exactly the pieces `kernel.advance` composes in a step
 (internal_loads or its neo-Hookean twin, the clamp couples, the external loads), so there
-is one copy of every law; self-contact is left out (the static model covers states that do
-not touch themselves: `touching` below says when that holds).
+is one copy of every law. Self-contact is added when the model has it (static_model(...,
+contact=True)): the kernel's own pair and fold springs at v = 0 (`contact_loads`), where
+its dashpot and friction vanish, over the candidate pairs of the state.
+
+What contact does to Newton's method (measured on the kernel's settled Fig 2b solenoid at
+n = 64, tests/test_static.py builds it): the loads with contact are smooth at the scale of
+a Newton step (the remainder of their linearisation grows as the step squared, no kinks),
+but the remainder equals the linear change already at 1e-3 of a full Newton step (the
+step: 0.4 rest radii, 0.35 rad), and nine tenths of it is contact's. The likely cause: the
+closest points of two nearly parallel segments, which neighbouring loops of a coil are,
+slide far along them for a small move across, and the force's split between the nodes
+slides with them. Newton with a line search, with a trust region of 0.1 radii, and
+pseudo-transient continuation (implicit damped steps) all crawl from that state (residual
+9.7e-4 → 9.2e-4 of the force scale in 60 steps). The continuation solver (issue #28) needs
+a contact law smoother across parallel segments, compared with this one on the kernel's
+settled states.
 
 Unknowns (`StaticModel.unknowns`):
     the free position components of the nodes (held components are not unknowns), then a
@@ -34,9 +48,11 @@ What the stability test can and cannot prove (`stability`):
   eigenvalues are computed (dense: 0.1 s at 478 unknowns, seconds at 958), since a state
   far past an onset has its growing modes far from zero. It does not see flutter (a complex
   pair whose damped growth the kernel's damping could allow): none is known in these scenes.
-- It says nothing about states in self-contact (the static model has no contact) and is
-  local: a stable state can still be left by a finite push (the subcritical snap of a
-  solenoid).
+- With contact, the symmetric test takes a dense Cholesky factorization (the pairs couple
+  blocks far apart along the rod, so K is not banded in rod order). Contact switches off
+  across a pair's touching point: the test speaks for the pairs that touch at the state.
+  It is local: a stable state can still be left by a finite push (the subcritical snap
+  of a solenoid).
 """
 
 from __future__ import annotations
@@ -49,6 +65,7 @@ import scipy.linalg
 
 from . import kernel as k
 from ._jit import njit
+from .contact import DASHPOT_ROWS, build_pairs, contact_forces_in, fold_forces
 from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
 from .neo_hookean import clamp_couple_neo_hookean, internal_loads_neo_hookean
 
@@ -128,6 +145,38 @@ def _gather(force, torque, free, out):
     for i in range(n):
         for c in range(3):
             out[m + 3 * i + c] = torque[c, i]
+
+
+@njit(cache=True)
+def contact_loads(x, rod, now, incompressible, fold, exclusion, pairs, n_pairs, force):
+    """Add the self-contact forces of the state x at rest to force (3, n+1): the kernel's
+    own pair springs (contact.contact_forces_in, at v = 0, where its dashpot and friction
+    vanish) over the candidate `pairs`, and its fold springs (contact.fold_forces) if `fold`.
+    The radii follow the element lengths as the kernel's do (a0/√e when incompressible).
+    Returns the number of touching pairs."""
+    n = x.shape[1] - 1
+    lengths = np.empty(n)
+    dilatation = np.empty(n)
+    for i in range(n):
+        d0 = x[0, i + 1] - x[0, i]
+        d1 = x[1, i + 1] - x[1, i]
+        d2 = x[2, i + 1] - x[2, i]
+        lengths[i] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        dilatation[i] = lengths[i] / rod.rest_length[i]
+    radius = np.empty(n)
+    k._radii(rod.rest_radius, dilatation, now[k.T_RADIUS], incompressible, radius)
+    at_rest = np.zeros((3, n + 1))
+    touching, _, _, _, _ = contact_forces_in(
+        x, at_rest, radius, pairs, n_pairs, rod.contact_k, rod.contact_c, now[k.T_STIFFNESS],
+        0.0, 1.0, 1.0 if incompressible else 0.0, force, np.empty((DASHPOT_ROWS, 0)), False,
+        np.empty((3, n)), np.empty(n), np.empty(n))
+    if fold:
+        folded, _, _, _ = fold_forces(x, radius, lengths, rod.rest_length, exclusion,
+                                      rod.contact_k, now[k.T_STIFFNESS],
+                                      np.empty(exclusion + 1, dtype=np.int64),
+                                      np.empty(n + 1, dtype=np.int64), force)
+        touching += folded
+    return touching
 
 
 @njit(cache=True)
@@ -223,6 +272,13 @@ class StaticModel:
     free: np.ndarray
     block_of: np.ndarray
     length_scale: float  # m: the element length, for finite-difference steps
+    # self-contact as the kernel has it (contact.enabled): the pair springs between elements
+    # more than `exclusion` apart, the fold springs inside it if `fold`; skin [m]: how far
+    # beyond touching a pair is listed (the kernel's Verlet skin)
+    contact: bool = False
+    fold: bool = False
+    exclusion: int = 1
+    skin: float = 0.0
 
     @property
     def unknowns(self) -> int:
@@ -234,8 +290,10 @@ class StaticModel:
 
 
 def static_model(rod: k.RodProperties, ends: k.Boundary, now: np.ndarray, *,
-                 incompressible: bool, neo_hookean: bool) -> StaticModel:
-    """The unknowns of a rod held by `ends`: every node component not held, every frame."""
+                 incompressible: bool, neo_hookean: bool, contact: bool = False,
+                 fold: bool = False, exclusion: int = 1, skin: float = 0.0) -> StaticModel:
+    """The unknowns of a rod held by `ends`: every node component not held, every frame.
+    With `contact`, the loads include self-contact (see StaticModel)."""
     n = rod.rest_length.shape[0]
     free = []
     for i in range(n + 1):
@@ -247,15 +305,102 @@ def static_model(rod: k.RodProperties, ends: k.Boundary, now: np.ndarray, *,
     block_of = np.concatenate([free[1], np.repeat(np.arange(n), 3)]).astype(np.int64)
     return StaticModel(rod, ends, bool(incompressible), bool(neo_hookean),
                        np.asarray(now, dtype=float), free, block_of,
-                       float(np.mean(rod.rest_length)))
+                       float(np.mean(rod.rest_length)), bool(contact), bool(fold),
+                       int(exclusion), float(skin))
 
 
-def loads(model: StaticModel, x: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """(N,) loads on the unknowns of the state (x (3, n+1), Q (3, 3, n)) at rest."""
+def loads(model: StaticModel, x: np.ndarray, Q: np.ndarray,
+          pairs: np.ndarray | None = None) -> np.ndarray:
+    """(N,) loads on the unknowns of the state (x (3, n+1), Q (3, 3, n)) at rest, self-contact
+    included if the model has it (over `pairs` (2, P), default the candidates of x)."""
     out = np.empty(model.unknowns)
     residual(x, Q, model.rod, model.ends, model.incompressible, model.neo_hookean, model.now,
              model.free, out)
+    if model.contact:
+        force = contact_force(model, x, pairs)
+        out[:model.positions] += force[model.free[0], model.free[1]]
     return out
+
+
+def candidate_pairs(model: StaticModel, x: np.ndarray) -> np.ndarray:
+    """(2, P) the element pairs that could touch near x: more than `exclusion` apart along
+    the rod, midpoints within two radii, an element and the skin (as the kernel lists them)."""
+    lengths = np.linalg.norm(np.diff(x, axis=1), axis=0)
+    radius = contact_radii(model, lengths)
+    cutoff = 2.2 * radius.max() + lengths.max() + model.skin
+    pairs, count = build_pairs(np.ascontiguousarray(x), model.exclusion, cutoff,
+                               np.empty((2, 4 * len(lengths)), dtype=np.int64))
+    return np.ascontiguousarray(pairs[:, :count])
+
+
+def contact_radii(model: StaticModel, lengths: np.ndarray) -> np.ndarray:
+    """(n,) the current radii [m] of elements this long, as the kernel's contact takes them."""
+    radius = model.rod.rest_radius * model.now[k.T_RADIUS]
+    if model.incompressible:
+        radius = radius / np.sqrt(lengths / model.rod.rest_length)
+    return radius
+
+
+def contact_force(model: StaticModel, x: np.ndarray,
+                  pairs: np.ndarray | None = None) -> np.ndarray:
+    """(3, n+1) the self-contact forces on the nodes at rest (zero without contact)."""
+    x = np.ascontiguousarray(x, dtype=float)
+    force = np.zeros_like(x)
+    if model.contact:
+        pairs = candidate_pairs(model, x) if pairs is None else pairs
+        contact_loads(x, model.rod, model.now, model.incompressible, model.fold,
+                      model.exclusion, pairs, pairs.shape[1], force)
+    return force
+
+
+def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
+    """(N, N) −∂(contact loads)/∂(unknowns) at x: non-zero in the position unknowns only
+    (contact forces act on nodes and depend on nodes). Central differences, the nodes
+    coloured so that two nodes of one colour never reach a common node: node a reaches the
+    nodes of every candidate pair one of its elements is in, and (folds) the nodes within
+    `exclusion` of it. The candidate pairs of x are kept for every perturbation."""
+    N = model.unknowns
+    K = np.zeros((N, N))
+    if not model.contact:
+        return K
+    x = np.ascontiguousarray(x, dtype=float)
+    n = x.shape[1] - 1
+    pairs = candidate_pairs(model, x)
+    reach = [set(range(max(0, a - model.exclusion - 1), min(n, a + model.exclusion + 1) + 1))
+             if model.fold else {a} for a in range(n + 1)]
+    for i, j in pairs.T:
+        nodes = {int(i), int(i) + 1, int(j), int(j) + 1}
+        for a in nodes:
+            reach[a] |= nodes
+    # greedy colouring: a node takes the first colour none of the nodes it shares a reached
+    # node with has taken
+    reached_by = [set() for _ in range(n + 1)]
+    for a in range(n + 1):
+        for b in reach[a]:
+            reached_by[b].add(a)
+    colour = np.full(n + 1, -1)
+    for a in range(n + 1):
+        taken = {colour[c] for b in reach[a] for c in reached_by[b] if colour[c] >= 0}
+        colour[a] = next(c for c in range(n + 2) if c not in taken)
+    index = np.full((3, n + 1), -1)  # the unknown of each free position component
+    index[model.free[0], model.free[1]] = np.arange(model.positions)
+    h = 1e-6 * model.length_scale
+    for c in range(colour.max() + 1):
+        members = np.flatnonzero(colour == c)
+        for comp in range(3):
+            step = np.zeros_like(x)
+            step[comp, members] = h
+            difference = (contact_force(model, x + step, pairs)
+                          - contact_force(model, x - step, pairs)) / (2.0 * h)
+            for a in members:
+                column = index[comp, a]
+                if column < 0:
+                    continue
+                for b in reach[a]:
+                    rows = index[:, b]
+                    ok = rows >= 0
+                    K[rows[ok], column] = -difference[ok, b]
+    return K
 
 
 def stiffness_matrix(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
@@ -275,6 +420,9 @@ def stiffness_matrix(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
     stiffness(np.ascontiguousarray(x), np.ascontiguousarray(Q), model.rod, model.ends,
               model.incompressible, model.neo_hookean, model.now, model.free, model.block_of,
               wanted, stride, 1e-6 * model.length_scale, 1e-6, K)
+    if model.contact:
+        contact = contact_stiffness(model, x)
+        K[:, wanted] += contact[:, wanted]
     return K
 
 
@@ -340,9 +488,12 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     scale = 1.0 / np.sqrt(masses(model, x))
     A = K * scale[:, None] * scale[None, :]
     order, width = rod_order(model.block_of)
-    try:  # banded in rod order: O(N·width²), a millisecond where a dense one takes 100
-        scipy.linalg.cholesky_banded(symmetric_band(A[np.ix_(order, order)], width),
-                                     check_finite=False)
+    try:
+        if model.contact:  # pairs couple nodes far apart: not banded in rod order
+            np.linalg.cholesky(0.5 * (A + A.T))
+        else:  # banded in rod order: O(N·width²), a millisecond where a dense one takes 100
+            scipy.linalg.cholesky_banded(symmetric_band(A[np.ix_(order, order)], width),
+                                         check_finite=False)
         return Stability(True, 0, math.nan, "symmetric part")
     except np.linalg.LinAlgError:
         pass
@@ -441,6 +592,26 @@ def step_along(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     return displaced(x, Q, mode, du[m:].reshape(n, 3), 1.0)
 
 
+def newton_step(model: StaticModel, K: np.ndarray, r: np.ndarray, order: np.ndarray,
+                width: int) -> np.ndarray:
+    """du (N,) with K·du = r. Without contact K is banded in rod order (banded LU); contact
+    couples nodes far apart along the rod, and a sparse LU (SuperLU, its own fill-reducing
+    ordering) takes the band and the pairs' blocks together."""
+    if model.contact:
+        from scipy.sparse import csc_matrix
+        from scipy.sparse.linalg import splu
+
+        return splu(csc_matrix(K)).solve(r)
+    K = K[np.ix_(order, order)]
+    band = np.zeros((2 * width + 1, len(order)))
+    for d in range(-width, width + 1):  # ab[width + i - j, j] = K[i, j]
+        band[width - d, max(d, 0):len(order) + min(d, 0)] = np.diagonal(K, d)
+    du_ordered = scipy.linalg.solve_banded((width, width), band, r[order], check_finite=False)
+    du = np.empty_like(du_ordered)
+    du[order] = du_ordered
+    return du
+
+
 def solve(model: StaticModel, x: np.ndarray, Q: np.ndarray, *, force_scale: float,
           tolerance: float = 1e-8, max_iterations: int = 50) -> Solution:
     """Newton's method for the rest state nearest (x, Q): K·du = loads, banded LU in rod order
@@ -455,18 +626,11 @@ def solve(model: StaticModel, x: np.ndarray, Q: np.ndarray, *, force_scale: floa
             return Solution(x, Q, True, norm / force_scale, iteration, "converged")
         if iteration == max_iterations:
             break
-        K = stiffness_matrix(model, x, Q)[np.ix_(order, order)]
-        band = np.zeros((2 * width + 1, len(order)))
-        for d in range(-width, width + 1):  # ab[width + i - j, j] = K[i, j]
-            band[width - d, max(d, 0):len(order) + min(d, 0)] = np.diagonal(K, d)
         try:
-            du_ordered = scipy.linalg.solve_banded((width, width), band, r[order],
-                                                   check_finite=False)
-        except (np.linalg.LinAlgError, ValueError) as error:
+            du = newton_step(model, stiffness_matrix(model, x, Q), r, order, width)
+        except (np.linalg.LinAlgError, ValueError, RuntimeError) as error:
             return Solution(x, Q, False, norm / force_scale, iteration,
                             f"singular stiffness ({error}): a fold or a bifurcation")
-        du = np.empty_like(du_ordered)
-        du[order] = du_ordered
         scale = 1.0
         for _ in range(30):
             x_try, Q_try = step_along(model, x, Q, scale * du)
