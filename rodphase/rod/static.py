@@ -9,17 +9,22 @@ contact=True)): the kernel's own pair and fold springs at v = 0 (`contact_loads`
 its dashpot and friction vanish, over the candidate pairs of the state.
 
 What contact does to Newton's method (measured on the kernel's settled Fig 2b solenoid at
-n = 64, tests/test_static.py builds it): the loads with contact are smooth at the scale of
-a Newton step (the remainder of their linearisation grows as the step squared, no kinks),
-but the remainder equals the linear change already at 1e-3 of a full Newton step (the
-step: 0.4 rest radii, 0.35 rad), and nine tenths of it is contact's. The likely cause: the
-closest points of two nearly parallel segments, which neighbouring loops of a coil are,
-slide far along them for a small move across, and the force's split between the nodes
-slides with them. Newton with a line search, with a trust region of 0.1 radii, and
-pseudo-transient continuation (implicit damped steps) all crawl from that state (residual
-9.7e-4 → 9.2e-4 of the force scale in 60 steps). The continuation solver (issue #28) needs
-a contact law smoother across parallel segments, compared with this one on the kernel's
-settled states.
+n = 64, the state tests/test_static.py builds): the loads with contact are smooth at the
+scale of a Newton step (the remainder of their linearisation grows as the step squared, no
+kinks), but it equals the linear change already at 1e-3 of a full step. The full step is
+0.4 rest radii and 0.35 rad: the kernel's hold stops at a residual of 1e-3 of the force
+scale, and the equilibrium lies that far away along a soft mode (the loops sliding along
+each other, ω² ≈ 20 s⁻²). Moving along it to first order presses the stiff pair springs
+(10 E per unit overlap and length) at second order, and those forces swamp the soft
+mode's. Freezing the closest-point parameters of the pairs leaves the remainder as it is
+(within 0.3 %): it is the springs' geometry, not the segments' parametrisation. Newton
+with a line search, with a trust region of 0.1 radii, and pseudo-transient continuation
+(implicit damped steps: they do not grow past the explicit kernel's step, 5e-5 s) all
+crawl from that state (9.7e-4 → 9.2e-4 of the force scale in 60 steps), and a penalty
+0.01 to 0.3 times as stiff does not converge either (Newton finds no descent after 13 to
+31 steps). A continuation solver with contact (issue #28) has to take this on: steps
+small along the soft modes, a reduced model of the sliding, or the kernel as the
+corrector.
 
 Unknowns (`StaticModel.unknowns`):
     the free position components of the nodes (held components are not unknowns), then a
