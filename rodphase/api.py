@@ -57,21 +57,24 @@ def _overrides(overrides, settings: dict) -> list[tuple[str, Any]]:
 def load(scene, overrides=None, **settings) -> C.Frozen:
     """A validated scene config: `scene` is a shipped scene's name, a YAML path, a plain dict
     (a scene mapping), or a config from an earlier load (then the overrides apply to it)."""
+    from .restart import checked_initial_state
     from .scenes import SCENES
 
     items = _overrides(overrides, settings)
     if isinstance(scene, Mapping):
         plain = scene.plain() if isinstance(scene, C.Frozen) else dict(scene)
-        return C.checked_initial_state(C.validate_scene(C.apply_overrides(plain, items), SCENES))
-    return C.load_scene(str(scene), items, SCENES)
+        return checked_initial_state(C.validate_scene(C.apply_overrides(plain, items), SCENES))
+    return checked_initial_state(C.load_scene(str(scene), items, SCENES))
 
 
 def load_sweep(sweep, overrides=None, **settings) -> tuple[C.Frozen, C.Frozen]:
     """(sweep, base scene) from a sweep file or a shipped sweep's name ("quick",
     "fig3_paper"). Keys under "sweep." change the sweep, all others the scene."""
+    from .restart import checked_initial_state
     from .scenes import SCENES
 
-    return C.load_sweep(sweep, _overrides(overrides, settings), SCENES)
+    sweep_cfg, scene_cfg = C.load_sweep(sweep, _overrides(overrides, settings), SCENES)
+    return sweep_cfg, checked_initial_state(scene_cfg)
 
 
 def _say(text: str) -> None:

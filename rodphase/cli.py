@@ -102,9 +102,10 @@ def run(scene, output, sets, force):
       rodphase run twist_under_load -o run.h5 --set loading.twist_density=1.2
       rodphase run my_scene.yaml -o out/mine.h5 --set rod.elements=120
     """
+    from .restart import checked_initial_state
     from .scenes import SCENES
 
-    cfg = C.load_scene(scene, _overrides(sets), SCENES)
+    cfg = checked_initial_state(C.load_scene(scene, _overrides(sets), SCENES))
     from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
     from .tabulate import classify_store
@@ -198,11 +199,13 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
       rodphase sweep fig3_paper -o fig3.h5 --set sweep.samples=400 --set rod.elements=120
       rodphase sweep fig3_paper -o fig3.h5 --backend dask --scheduler tcp://head:8786
     """
+    from .restart import checked_initial_state
     from .runner import check_jobs_memory
     from .scenes import SCENES
     from .sweep import ClusterLost, plan, run_sweep
 
     sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
+    checked_initial_state(scene_cfg)
     check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
     try:
         patience = float(reconnect_timeout)
@@ -516,6 +519,7 @@ def config(name, sets):
       rodphase config twist_under_load --set rod.elements=60
       rodphase config quick --set sweep.samples=40
     """
+    from .restart import checked_initial_state
     from .scenes import SCENES
 
     try:
@@ -525,9 +529,10 @@ def config(name, sets):
         is_sweep = False
     if is_sweep:
         sweep_cfg, scene_cfg = C.load_sweep(path, _overrides(sets), SCENES)
-        click.echo(C.to_yaml(sweep=sweep_cfg, scene=scene_cfg), nl=False)
+        click.echo(C.to_yaml(sweep=sweep_cfg, scene=checked_initial_state(scene_cfg)), nl=False)
     else:
-        click.echo(C.to_yaml(scene=C.load_scene(name, _overrides(sets), SCENES)), nl=False)
+        scene_cfg = checked_initial_state(C.load_scene(name, _overrides(sets), SCENES))
+        click.echo(C.to_yaml(scene=scene_cfg), nl=False)
 
 
 @main.command()

@@ -361,7 +361,7 @@ INITIAL_STATE_FORMAT = ('"FILE.h5#RUN_ID": a rodphase store, "#", and a run id a
 
 def initial_state(path: str, value: Any) -> str:
     """The format of `initial_state` (whether the file and the run exist is checked by
-    rodphase.restart.check_initial_state, which reads the file)."""
+    rodphase.restart.checked_initial_state, which reads the file)."""
     if value is None:
         # --set initial_state=#run: YAML reads everything from " #" or a leading "#" as a
         # comment, which leaves no value at all
@@ -649,18 +649,10 @@ def resolve_scene_path(name: str, base: Path | None = None) -> Path:
 
 
 def load_scene(path: str | Path, overrides=(), registered=None) -> Frozen:
+    """A validated scene. Its initial_state (a stored run) is checked against the store by
+    restart.checked_initial_state, which the CLI and the API call: config reads no store."""
     path = resolve_scene_path(str(path))
-    return checked_initial_state(
-        validate_scene(apply_overrides(read_yaml(path), list(overrides)), registered))
-
-
-def checked_initial_state(scene: Frozen) -> Frozen:
-    """`scene`, once the store and run its initial_state names (if any) were found and hold
-    the same rod: the loaders refuse them before anything runs or any store is made."""
-    from .restart import check_initial_state
-
-    check_initial_state(scene)
-    return scene
+    return validate_scene(apply_overrides(read_yaml(path), list(overrides)), registered)
 
 
 def resolve_sweep_path(name: str | Path) -> Path:
@@ -717,8 +709,7 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
         for other in _axis_controls(axis):
             if other != AXES[axis][1]:
                 scene_raw[section].pop(other.split(".")[1], None)
-    scene = checked_initial_state(validate_scene(scene_raw, registered))
-    return sweep, scene
+    return sweep, validate_scene(scene_raw, registered)
 
 
 def _axis_controls(axis: str) -> tuple[str, ...]:

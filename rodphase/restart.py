@@ -117,6 +117,14 @@ def read_state(value: str) -> StoredState:
         rest_radius=float(diagnostics.get("rest_radius", math.nan)), at_rest=at_rest)
 
 
+def checked_initial_state(cfg):
+    """`cfg`, once the store and run its initial_state names (if any) were found and hold
+    the same rod: the loaders (CLI, API) refuse them before anything runs or any store is
+    made. config.py validates the key's form; this reads the store."""
+    check_initial_state(cfg)
+    return cfg
+
+
 def check_initial_state(cfg) -> None:
     """Refuse early (before a store is made or a sweep starts) an initial_state whose file or
     run is missing or whose rod is not the config's; nothing to do without one."""
