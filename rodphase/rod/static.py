@@ -22,9 +22,12 @@ with a line search, with a trust region of 0.1 radii, and pseudo-transient conti
 (implicit damped steps: they do not grow past the explicit kernel's step, 5e-5 s) all
 crawl from that state (9.7e-4 → 9.2e-4 of the force scale in 60 steps), and a penalty
 0.01 to 0.3 times as stiff does not converge either (Newton finds no descent after 13 to
-31 steps). A continuation solver with contact (issue #28) has to take this on: steps
-small along the soft modes, a reduced model of the sliding, or the kernel as the
-corrector.
+31 steps). And there may be no equilibrium to find: the same solenoid held 40 s with a
+tolerance of 1e-7 stops at a residual of 1.3e-5 that then slowly grows, Newton from there
+stays at 1.3e-5, and the stability test finds one mode of ω² = −0.38 s⁻² (the loops
+creep). A continuation solver with contact (issue #28) has to take this on: say where a
+coil has no static equilibrium, take steps small along the soft modes, or keep the kernel
+as the corrector there.
 
 Unknowns (`StaticModel.unknowns`):
     the free position components of the nodes (held components are not unknowns), then a
