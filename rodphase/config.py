@@ -385,7 +385,7 @@ SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
     "scene": (text, REQUIRED),
     "set": (None, {}),
     "axes": (None, REQUIRED),
-    "sampler": (choice("random", "lhs", "grid", "continuation", "adaptive"), "random"),
+    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive"), "random"),
     "samples": (number(1, 100000, integer=True), 12),
     "seed": (number(0, integer=True), 0),
 }

@@ -45,13 +45,28 @@ def _lhs(axes: dict, samples: int, seed: int) -> np.ndarray:
     return qmc.LatinHypercube(d=len(axes), seed=np.random.default_rng(seed)).random(samples)
 
 
+def _sobol(axes: dict, samples: int, seed: int) -> np.ndarray:
+    """The first `samples` points of a scrambled Sobol sequence: random (the scrambling is
+    seeded), and spread over the box far more evenly than independent draws, so that no
+    corner of a 200-point map is left empty. Any count is allowed: the first N points of the
+    sequence keep its low discrepancy, though only powers of two balance it exactly."""
+    import warnings
+
+    from scipy.stats import qmc
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*balance properties.*")
+        return qmc.Sobol(d=len(axes), scramble=True,
+                         seed=np.random.default_rng(seed)).random(samples)
+
+
 def _grid(axes: dict, samples: int, seed: int) -> np.ndarray:
     per_axis = max(1, math.ceil(samples ** (1.0 / len(axes)) - 1e-9))
     ticks = np.linspace(0.0, 1.0, per_axis) if per_axis > 1 else np.array([0.5])
     return np.array(list(itertools.product(ticks, repeat=len(axes))))
 
 
-SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "grid": _grid,
+SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "sobol": _sobol, "grid": _grid,
                                  "continuation": _grid, "adaptive": _lhs}
 
 
