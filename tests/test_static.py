@@ -104,11 +104,21 @@ def test_self_contact_at_rest_is_the_kernels_pair_law_and_conserves_momentum():
     assert np.abs(touched - plain).max() > 0.01 * problem.rod.buckling_force
 
 
-def test_the_stiffness_with_contact_matches_plain_central_differences_of_the_loads():
+@pytest.mark.parametrize("case", ["coil", "fold", "body"])
+def test_the_stiffness_with_contact_matches_plain_central_differences_of_the_loads(case):
     # the contact columns are coloured (nodes that reach no common node are perturbed
     # together) and the rod's are banded: together they must equal one column at a time of
-    # the loads with contact, up to the differences' round-off (1e-9 of the largest entry)
-    problem, model = coil_in_contact(n=36)
+    # the loads with contact, up to the differences' round-off (1e-9 of the largest entry);
+    # a coil's pairs, a fold's springs and an end body's push (its reaction on the end node)
+    if case == "coil":
+        problem, model = coil_in_contact(n=36)
+    else:
+        problem = cornered_rod(case)
+        model = static_model_of(problem, contact=True)
+        if case == "fold":
+            # one element of the far leg 2 % longer: the thinnest, whose radius bounds every
+            # fold (contact.fold_forces), unique (equal lengths are the min's kink)
+            problem.state.x[0, 31:] += 0.02 * problem.rod.element_length
     x, Q = problem.state.x, problem.state.Q
     K = static.stiffness_matrix(model, x, Q)
     pairs = static.candidate_pairs(model, x)
@@ -152,3 +162,84 @@ def test_a_solenoid_the_kernel_settled_is_an_equilibrium_of_the_static_loads_wit
     assert abs(static_residual - measured) < 0.01 * measured, (static_residual, measured)
     no_contact = static_model_of(problem, controls=problem.stages[-1].controls)
     assert static.residual_norm(no_contact, static.loads(no_contact, x, Q)) / scale > 0.1
+
+
+def kernel_residual(problem: Problem) -> float:
+    """The kernel's residual (largest free nodal force or torque per length, over the force
+    scale) at problem.state, as its first history row records it (one step run)."""
+    import dataclasses
+
+    from rodphase.rod.model import Stage
+    from rodphase.rod.simulate import clamp_reference, simulate, time_step
+
+    dt, _ = time_step(problem)
+    once = dataclasses.replace(
+        problem, clamp_reference=clamp_reference(problem), stages=(Stage(dt),),
+        contact=dataclasses.replace(problem.contact, sleep=False),
+        solver=dataclasses.replace(problem.solver, history_interval=dt, check_interval=1))
+    return float(simulate(once).history["residual"][0])
+
+
+def polyline_state(points):
+    """A rod state along the polyline through `points` (n+1, 3) in the x-z plane: d3 along
+    each element, d1 = +y."""
+    from rodphase.rod.model import state_from
+
+    t = np.diff(points, axis=0)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    d1 = np.tile([0.0, 1.0, 0.0], (len(t), 1))
+    return state_from(points, np.stack([d1, np.cross(t, d1), t], axis=1))
+
+
+@pytest.mark.parametrize("piece", ["fold", "body"])
+def test_folds_and_end_bodies_at_rest_are_the_kernels(piece):
+    # "fold": a rod turned by a right angle at one node: the nodes either side of the corner
+    # are 1.34 a apart, inside the 1.63 a a fold of the rod's radius allows, so the fold
+    # springs push them apart. "body": the rod leaves the clamp across the axis for 1.9 a,
+    # then runs down beside the start's end body (radius a on the axis), its nodes
+    # overlapping the body by 0.1 a. Each at rest in its own shape (rest curvature = its
+    # curvature), so that contact is the only load: the static model's residual must be
+    # the one the kernel measures at that state (the same pieces composed: 1e-9), and
+    # without the piece under test it must not be
+    import dataclasses
+
+    from rodphase.rod.simulate import force_scale
+
+    problem = cornered_rod(piece)
+    state = problem.state
+    model = static_model_of(problem, contact=True)
+    scale = force_scale(problem)
+    static_residual = static.residual_norm(model, static.loads(model, state.x, state.Q)) / scale
+    measured = kernel_residual(problem)
+    assert measured > 0.01  # contact pushes, far beyond the round-off of the rest shape
+    assert abs(static_residual - measured) < 1e-9 * measured, (static_residual, measured)
+    without = (dataclasses.replace(model, fold=False) if piece == "fold" else
+               dataclasses.replace(model, ends=model.ends._replace(start_body=False)))
+    bare = static.residual_norm(without, static.loads(without, state.x, state.Q)) / scale
+    assert bare < 1e-6 * measured
+
+
+def cornered_rod(piece: str) -> Problem:
+    """The states of the test above, at rest in their own shape."""
+    import dataclasses
+
+    from rodphase.rod.model import Contact
+    from rodphase.scenes import measured_curvature
+
+    n, a = 40, 0.02
+    l0 = 0.95 * a
+    corner = 20 if piece == "fold" else 2
+    points = np.zeros((n + 1, 3))
+    for i in range(n + 1):
+        if piece == "fold":  # up along z, then along x
+            points[i] = [0, 0, i * l0] if i <= corner else [(i - corner) * l0, 0, corner * l0]
+        else:  # along x to 1.9 a, then down along -z beside the body
+            points[i] = [i * l0, 0, 0] if i <= corner else [corner * l0, 0, -(i - corner) * l0]
+    rod = Rod(length=n * l0, radius=a, elements=n)
+    state = polyline_state(points)
+    problem = Problem(rod=rod, state=state,
+                      ends=dataclasses.replace(CANTILEVER, start_body=piece == "body"),
+                      contact=Contact(enabled=True, fold=piece == "fold"),
+                      force_scale=rod.buckling_force,
+                      rest_curvature=measured_curvature(state.directors, np.full(n, l0)))
+    return problem

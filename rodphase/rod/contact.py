@@ -532,8 +532,8 @@ def fold_forces(x, radius, lengths, rest_length, exclusion, stiffness, scale, re
     had a node turning at least 0.96 of the circle's; tests/test_fold.py checks the skip
     against a scan of every pair.
 
-    lengths are the current element lengths; reach (exclusion + 1,) and next_tight (n + 1,)
-    int64 are work buffers. Returns (pairs pushed, largest (d_min − d) / radius, its first
+    lengths are the current element lengths; reach (exclusion + 1,) float64 (squared
+    distances) and next_tight (n + 1,) int64 are work buffers. Returns (pairs pushed, largest (d_min − d) / radius, its first
     node's element, spring energy Σ ½·k·(d_min − d)²).
     """
     n = rest_length.shape[0]

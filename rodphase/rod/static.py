@@ -5,8 +5,9 @@ explicit kernel would compute for it at rest (v = w = 0) vanish on its free degr
 freedom. `loads_at_rest` composes exactly the pieces `kernel.advance` composes in a step
 (internal_loads or its neo-Hookean twin, the clamp couples, the external loads), so there
 is one copy of every law. Self-contact is added when the model has it (static_model(...,
-contact=True)): the kernel's own pair and fold springs at v = 0 (`contact_loads`), where
-its dashpot and friction vanish, over the candidate pairs of the state.
+contact=True)): the kernel's own pair, fold and end-body springs at v = 0
+(`contact_loads`), where its dashpot and friction vanish, over the candidate pairs of the
+state.
 
 What contact does to Newton's method (measured on the kernel's settled Fig 2b solenoid at
 n = 64, the state tests/test_static.py builds): the loads with contact are smooth at the
@@ -73,7 +74,7 @@ import scipy.linalg
 
 from . import kernel as k
 from ._jit import njit
-from .contact import DASHPOT_ROWS, build_pairs, contact_forces_in, fold_forces
+from .contact import DASHPOT_ROWS, add_body_forces, build_pairs, contact_forces_in, fold_forces
 from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
 from .neo_hookean import clamp_couple_neo_hookean, internal_loads_neo_hookean
 
@@ -156,12 +157,13 @@ def _gather(force, torque, free, out):
 
 
 @njit(cache=True)
-def contact_loads(x, rod, now, incompressible, fold, exclusion, pairs, n_pairs, force):
+def contact_loads(x, rod, ends, now, incompressible, fold, exclusion, pairs, n_pairs, force):
     """Add the self-contact forces of the state x at rest to force (3, n+1): the kernel's
     own pair springs (contact.contact_forces_in, at v = 0, where its dashpot and friction
-    vanish) over the candidate `pairs`, and its fold springs (contact.fold_forces) if `fold`.
-    The radii follow the element lengths as the kernel's do (a0/√e when incompressible).
-    Returns the number of touching pairs."""
+    vanish) over the candidate `pairs`, its fold springs (contact.fold_forces) if `fold`,
+    and the end bodies' (contact.add_body_forces) where `ends` has them, as kernel._contact_
+    loads composes them. The radii follow the element lengths as the kernel's do (a0/√e when
+    incompressible). Returns the number of touching pairs, folds and nodes."""
     n = x.shape[1] - 1
     lengths = np.empty(n)
     dilatation = np.empty(n)
@@ -181,9 +183,16 @@ def contact_loads(x, rod, now, incompressible, fold, exclusion, pairs, n_pairs, 
     if fold:
         folded, _, _, _ = fold_forces(x, radius, lengths, rod.rest_length, exclusion,
                                       rod.contact_k, now[k.T_STIFFNESS],
-                                      np.empty(exclusion + 1, dtype=np.int64),
+                                      np.empty(exclusion + 1),
                                       np.empty(n + 1, dtype=np.int64), force)
         touching += folded
+    for which in range(2):  # 0: the start's body, beyond node 0; 1: the end's
+        if ends.end_body if which == 1 else ends.start_body:
+            on_body, _, _, _ = add_body_forces(
+                x, at_rest, radius, rod.contact_k, rod.contact_c, now[k.T_STIFFNESS], which * n,
+                2.0 * which - 1.0, ends.axis, ends.body_radius, exclusion, force,
+                np.empty((DASHPOT_ROWS, 0)), 0, False)
+            touching += on_body
     return touching
 
 
@@ -356,17 +365,38 @@ def contact_force(model: StaticModel, x: np.ndarray,
     force = np.zeros_like(x)
     if model.contact:
         pairs = candidate_pairs(model, x) if pairs is None else pairs
-        contact_loads(x, model.rod, model.now, model.incompressible, model.fold,
+        contact_loads(x, model.rod, model.ends, model.now, model.incompressible, model.fold,
                       model.exclusion, pairs, pairs.shape[1], force)
     return force
+
+
+def _ends_with_bodies(model: StaticModel) -> list[int]:
+    n = model.rod.rest_length.shape[0]
+    return [end for end, on in ((0, model.ends.start_body), (n, model.ends.end_body)) if on]
+
+
+def _near_body(model: StaticModel, x: np.ndarray, end: int) -> np.ndarray:
+    """The nodes that could touch the body at node `end` (contact.add_body_forces' cylinder
+    on the axis beyond it) within the skin: not behind its cap by more than a radius and the
+    skin, not farther from its axis than its radius, a rod's and the skin."""
+    lengths = np.linalg.norm(np.diff(x, axis=1), axis=0)
+    widest = contact_radii(model, lengths).max()
+    side = 1.0 if end else -1.0
+    relative = x - x[:, end:end + 1]
+    along = side * (np.asarray(model.ends.axis) @ relative)
+    across = np.linalg.norm(relative - np.outer(side * np.asarray(model.ends.axis), along), axis=0)
+    margin = widest + model.skin
+    return np.flatnonzero((along > -margin) & (across < model.ends.body_radius + margin))
 
 
 def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
     """(N, N) −∂(contact loads)/∂(unknowns) at x: non-zero in the position unknowns only
     (contact forces act on nodes and depend on nodes). Central differences, the nodes
     coloured so that two nodes of one colour never reach a common node: node a reaches the
-    nodes of every candidate pair one of its elements is in, and (folds) the nodes within
-    `exclusion` of it. The candidate pairs of x are kept for every perturbation."""
+    nodes of every candidate pair one of its elements is in, (folds) the nodes within
+    `exclusion` of it, and (end bodies) the end node if it is near a body; the two nodes of
+    the most stretched element reach everything (its radius bounds every fold). The
+    candidate pairs of x are kept for every perturbation."""
     N = model.unknowns
     K = np.zeros((N, N))
     if not model.contact:
@@ -380,6 +410,22 @@ def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
         nodes = {int(i), int(i) + 1, int(j), int(j) + 1}
         for a in nodes:
             reach[a] |= nodes
+    if model.fold and model.incompressible:
+        # the fold bound takes the smallest radius over the rod (contact.fold_forces), that of
+        # the most stretched element: its two nodes reach every fold, wherever it is
+        thinnest = int(np.argmax(np.linalg.norm(np.diff(x, axis=1), axis=0)
+                                 / model.rod.rest_length))
+        everything = set(range(n + 1))
+        reach[thinnest] |= everything
+        reach[thinnest + 1] |= everything
+    # a node near an end body is pushed by it, with the reaction on the end node that
+    # carries the body; the node's radius follows its two elements, so its neighbours too
+    for end in _ends_with_bodies(model):
+        near = _near_body(model, x, end)
+        nodes = set(near) | {max(a - 1, 0) for a in near} | {min(a + 1, n) for a in near}
+        for a in nodes:
+            reach[a] |= {max(a - 1, 0), a, min(a + 1, n), end}
+        reach[end] |= nodes | {end}
     # greedy colouring: a node takes the first colour none of the nodes it shares a reached
     # node with has taken
     reached_by = [set() for _ in range(n + 1)]
