@@ -9,7 +9,7 @@ JOBS   ?= 2
 .PHONY: help install demo test lint bench figures phase fig3 onset-study clean
 
 help:  ## list the targets
-	@grep -hE '^[A-Za-z0-9 -]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-9s %s\n", $$1, $$2}'
+	@grep -hE '^[A-Za-z0-9 -]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
 
 # constraints.txt pins the versions the documented numbers were measured with (pip freeze of
 # a working install); `make install CONSTRAINTS=` installs the newest instead

@@ -373,6 +373,15 @@ def _classified_table(store, ids: list[str]):
     return store.table(both)
 
 
+def _run_with_history(store, ids: list[str]) -> str:
+    """The first run whose history has two rows or more (a curve to draw), else the first:
+    straight runs started on their equilibrium may settle at their first row."""
+    for rid in ids:
+        if len(store.histories(columns=["time"], run_ids=[rid])) >= 2:
+            return rid
+    return ids[0]
+
+
 def _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption,
           theory=True):
     import pandas as pd
@@ -425,8 +434,12 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                                result.positions, result.rest_radius))
             P.shape_grid(shapes, output)
         else:
-            rid = run_id or ids[0]
+            rid = run_id or _run_with_history(store, ids)
             result = store.read_run(rid)
+            if kind in ("topology", "force") and len(result.history["time"]) < 2:
+                raise C.ConfigError("--run", rid, "a run with a history of two rows or more "
+                                    f"to draw its {kind} curves: this one has one row (a run "
+                                    "started on its straight equilibrium that settled at once)")
             params = P.params_text(store.run_params(rid))
             if kind == "topology":
                 P.topology_curves(result, output, title=f"{rid}: {params}" if params else rid)
@@ -464,9 +477,13 @@ def movie(store_file, run_id, output, fps, height):
         # writing a GIF under another name (or beside it) would surprise: say it instead
         raise C.ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
                             "installed (apt install ffmpeg, conda install ffmpeg)")
-    C.make_output_folder(output)
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
+    if len(result.snapshot_positions) < 2:
+        raise C.ConfigError("--run", run_id, "a run with two snapshots or more to animate: "
+                            f"this one kept {len(result.snapshot_positions)} (a sweep keeps the "
+                            "final state only; run it with --set output.snapshots=all)")
+    C.make_output_folder(output)
     from .analysis import twist_density
 
     h = result.history

@@ -400,10 +400,12 @@ AXES = {
 }
 
 
-def _unknown(path: str, key: str, known) -> ConfigError:
+def _unknown(path: str, key: str, known, value) -> ConfigError:
+    """A key that is not one of `known`: its path and the value given to it, and the keys
+    allowed there (the nearest first, if one is near)."""
     close = difflib.get_close_matches(key, list(known), n=1)
     hint = f"; did you mean '{close[0]}'?" if close else ""
-    return ConfigError(f"{path}{key}", "unknown key", "one of " + ", ".join(known) + hint)
+    return ConfigError(f"{path}{key}", value, "a known key, one of " + ", ".join(known) + hint)
 
 
 def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
@@ -412,7 +414,7 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
         raise ConfigError("(top level)", raw, "a mapping with a 'scene' key")
     for key in raw:
         if key not in SCENE_KEYS:
-            raise _unknown("", key, SCENE_KEYS)
+            raise _unknown("", key, SCENE_KEYS, raw[key])
     name = raw.get("scene")
     if registered is not None and name not in registered:
         raise ConfigError("scene", name, "one of " + ", ".join(sorted(registered)))
@@ -427,7 +429,7 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
         values = {}
         for key in given:
             if key not in fields:
-                raise _unknown(f"{section}.", key, fields)
+                raise _unknown(f"{section}.", key, fields, given[key])
         for key, (check, default) in fields.items():
             path = f"{section}.{key}"
             if key in given:
@@ -727,7 +729,7 @@ def validate_sweep(raw: Any) -> Frozen:
         raise ConfigError("sweep", raw, "a mapping")
     for key in raw:
         if key not in SWEEP_SCHEMA:
-            raise _unknown("sweep.", key, SWEEP_SCHEMA)
+            raise _unknown("sweep.", key, SWEEP_SCHEMA, raw[key])
     out = {}
     for key, (check, default) in SWEEP_SCHEMA.items():
         if key not in raw:
@@ -746,7 +748,7 @@ def validate_sweep(raw: Any) -> Frozen:
     checked = {}
     for name, span in axes.items():
         if name not in AXES:
-            raise _unknown("sweep.axes.", name, AXES)
+            raise _unknown("sweep.axes.", name, AXES, span)
         checked[name] = AXES[name][0](f"sweep.axes.{name}", span)
     if "twist_density" in checked and "twist_density_current" in checked:
         raise ConfigError("sweep.axes.twist_density_current", checked["twist_density_current"],

@@ -262,6 +262,40 @@ def test_run_then_every_plot_kind_and_a_movie(tmp_path):
     assert result.exit_code == 2 and "nope" in result.output
 
 
+def test_curves_default_to_a_run_with_a_history_and_a_one_frame_movie_is_refused(tmp_path):
+    # a sweep's straight runs started on their equilibrium may settle at their first history
+    # row, and a sweep keeps one snapshot a run: `plot --kind topology` of the store drew
+    # empty axes from run-00000, and `movie` wrote a one-frame GIF (issue #30's newcomer)
+    import dataclasses
+
+    from rodphase.store import open_store
+
+    cfg = C.load_scene("twist_under_load", list(FAST.items()), SCENES)
+    full = run_scene(cfg.plain())
+    one_row = dataclasses.replace(full, history={k: v[:1] for k, v in full.history.items()},
+                                  snapshot_positions=full.snapshot_positions[-1:],
+                                  snapshot_d1=full.snapshot_d1[-1:])
+    out = tmp_path / "two.h5"
+    with open_store(out, config_text="x", config_hash="h" * 16, version="t",
+                    kind="sweep") as store:
+        store.write_run("run-00000", {"twist_density": 0.1}, one_row, {})
+        store.write_run("run-00001", {"twist_density": 0.5}, full, {})
+    from rodphase.cli import _run_with_history
+
+    with read_store(out) as store:
+        assert _run_with_history(store, store.run_ids()) == "run-00001"
+    for kind in ("topology", "force"):
+        result = cli("plot", out, "--kind", kind, "-o", tmp_path / f"{kind}.png")
+        assert result.exit_code == 0, result.output
+        result = cli("plot", out, "--kind", kind, "--run", "run-00000", "-o", tmp_path / "x.png")
+        assert result.exit_code == 2, result.output
+        assert result.output.startswith("error: --run: 'run-00000' (allowed: a run with a "
+                                        "history of two rows or more"), result.output
+    result = cli("movie", out, "--run", "run-00000", "-o", tmp_path / "movie" / "m.gif")
+    assert result.exit_code == 2 and "output.snapshots=all" in result.output, result.output
+    assert not (tmp_path / "movie").exists()  # nothing made by a command that refused
+
+
 def test_an_mp4_without_ffmpeg_is_an_error_not_a_gif(tmp_path, monkeypatch):
     import shutil
 
