@@ -183,7 +183,8 @@ def _escapes_line(result) -> str:
               "in flight are sent again), or for a worker once every worker has left.")
 @click.option("--retry-failed", is_flag=True, help="Run again the runs that failed before.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--quiet", is_flag=True, help="No progress bar (none either when stderr is not a "
+              "terminal).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
 def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry_failed, sets,
@@ -215,7 +216,9 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     try:
         report = run_sweep(sweep_cfg, scene_cfg, output, jobs=jobs, backend=backend,
                            scheduler=scheduler, retry_failed=retry_failed, replace=force,
-                           progress=not quiet, echo=click.echo, reconnect_timeout=patience)
+                           # a bar's carriage returns garble a log file (batch jobs, CI)
+                           progress=not quiet and sys.stderr.isatty(), echo=click.echo,
+                           reconnect_timeout=patience)
     except ClusterLost as exc:
         import shlex
 
