@@ -26,9 +26,13 @@ crawl from that state (9.7e-4 → 9.2e-4 of the force scale in 60 steps), and a 
 31 steps). And there may be no equilibrium to find: the same solenoid held 40 s with a
 tolerance of 1e-7 stops at a residual of 1.3e-5 that then slowly grows, Newton from there
 stays at 1.3e-5, and the stability test finds one mode of ω² = −0.38 s⁻² (the loops
-creep). A continuation solver with contact (issue #28) has to take this on: say where a
-coil has no static equilibrium, take steps small along the soft modes, or keep the kernel
-as the corrector there.
+creep). The Fig 2a plectoneme at n = 64 held 40 s is the same: the kernel's residual
+stops at 5.4e-6 and slowly grows, its stiffness has an eigenvalue at zero (ω² = −0.006
+s⁻², within the test's noise floor: neutral, the strands sliding on each other), and
+Newton stays at 5.5e-6. Frictionless contact leaves these shapes on a slow drift, not at
+an isolated equilibrium. A continuation solver with contact (issue #28) has to take this
+on: say where a shape has no isolated equilibrium, step along the neutral modes, or keep
+the kernel as the corrector there.
 
 Unknowns (`StaticModel.unknowns`):
     the free position components of the nodes (held components are not unknowns), then a
