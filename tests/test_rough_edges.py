@@ -292,3 +292,21 @@ def test_the_stored_classification_and_the_csv_describe_themselves(tmp_path):
     units = {c["name"]: c["unit"] for c in meta["tableSchema"]["columns"]}
     assert list(units) == list(frame.columns)
     assert units["wall_time"] == "s" and units["writhe"] == "turns"
+
+
+@pytest.mark.parametrize("args, line", [
+    (["plot", "missing.h5", "-o", "x.png"],
+     "error: Invalid value for 'OUT.h5': File 'missing.h5' does not exist. "
+     "(see rodphase plot --help)"),
+    (["run", "twist_under_load", "--bogus"],
+     "error: No such option '--bogus'. (see rodphase run --help)"),
+    (["sweep"], "error: Missing argument 'SWEEP.yaml'. (see rodphase sweep --help)"),
+])
+def test_clicks_own_refusals_are_one_error_line_too(tmp_path, args, line):
+    # a file that does not exist, an unknown option, a missing argument: the same contract
+    # as every other bad input (one line on stderr, exit 2), not click's usage block
+    result = subprocess.run([sys.executable, "-m", "rodphase.cli", *args], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.strip() == line, result.stderr
+    assert list(tmp_path.iterdir()) == []
