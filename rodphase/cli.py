@@ -621,4 +621,4 @@ def _first_sentence(yaml_text: str) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    main(prog_name="rodphase")  # `python -m rodphase.cli` speaks of itself as the command
