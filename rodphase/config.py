@@ -303,6 +303,9 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
         # a refined run goes on from a second before the trip ("trip") or starts over
         "refine_from": (choice("trip", "start"), "trip"),
+        # a run still stopped (clamp lag, resolution, shear) while an end turns is run again
+        # from the start at half loading.twist_rate, down to this rate
+        "slow_down_to": (number(0, unit="turns/s; 0 = never slow down"), 0.0),
         # a hold ends only at an equilibrium that survives a perturbation of this size
         "stability_probe": _engine("Solver", "stability_probe"),
         "probe_size": _engine("Solver", "probe_size"),
@@ -783,6 +786,9 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     # the static stability test of a hold's candidate (issue #32): on by default, so the
     # hashes moved again; solver.static_stability: false hashes (and runs) as before
     ("solver", "static_stability"): False,
+    # a run stopped while an end turns, run again at half the twist rate (issue #29): off by
+    # default, so no hash moved; the Fig 3 configs turn it on
+    ("solver", "slow_down_to"): 0.0,
 }
 
 

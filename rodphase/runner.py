@@ -180,6 +180,15 @@ REFINABLE_GUARDS = ("resolution", "shear")
 # 45° shear guard builds over about half a second (Fig 3's top edge: 19° 0.4 s after the snap
 # began, 45° later), and a second before it the rod is still resolved.
 REFINE_BACK = 1.0  # s
+# the guards a slower twist can mend (solver.slow_down_to), when they stop a run while an end
+# turns and more elements did not help: the clamp outrunning the rod's end frame, twist
+# piling up at the turning end faster than it spreads (the resolution guard at a fast ramp),
+# and the shear of the rod between a plectoneme growing next to the loaded end and that end.
+# At Fig 3's triple point (Phi*a 1.92, L/L0 1.13, n = 160) the largest stretch there grew
+# from 1.28 to 1.64 in 5 s of a 0.5 turns/s ramp, and stayed at 1.27 at 0.25 turns/s, where
+# the run ends a plectoneme; neither 320 elements nor a step 0.4 times as long mends all such
+# runs (docs/reproduction.md, "The triple point's failures").
+SLOWABLE_GUARDS = ("clamp_lag", "resolution", "shear")
 
 
 def _anchors(origin: Problem, first: RunResult, stage: int) -> tuple[np.ndarray, np.ndarray]:
@@ -272,8 +281,9 @@ def run_scene(scene, *, topology: bool | None = None,
     (validated first). Never raises for a failed run: a run that goes unstable comes back
     with that status. A run stopped by the 135° resolution guard or the 45° shear guard is run
     again with twice the elements, up to solver.refine_up_to (from a second before the trip
-    with solver.refine_from "trip", see refined_from_trip); `twist_targets` (turns) makes it
-    a continuation."""
+    with solver.refine_from "trip", see refined_from_trip); one still stopped while an end
+    turns is run again at half the twist rate, down to solver.slow_down_to (see
+    SLOWABLE_GUARDS); `twist_targets` (turns) makes it a continuation."""
     from .scenes import SCENES, build
 
     cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
@@ -294,35 +304,70 @@ def run_scene(scene, *, topology: bool | None = None,
             problem = continue_from(problem, stored)
         return problem, run(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
 
-    tried = [cfg.rod.elements]
-    refine_from = cfg.solver.refine_from
-    origin, result = once(cfg)
-    wall_before = 0.0
-    # A rod turned by > 135° between neighbouring frames needs more elements, not a smaller
-    # step, and so does one sheared by > 45° (a snap into a loop as tight as the rod, at
-    # Fig 3's top edge: at n = 80 15 of 200 points, at n = 140 1 of 40): with
-    # solver.refine_up_to, run it again with twice as many (up to that number): with
-    # solver.refine_from "trip" from a second before the trip (refined_from_trip), else, or
-    # if the trip came sooner, from the start. A run started from a stored state has the
-    # stored rod's elements and cannot refine; a continuation refines from the start.
-    while (result.diagnostics.get("guard") in REFINABLE_GUARDS and stored is None
-           and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
-        wall_before += result.diagnostics["wall_time"]
-        elements = min(2 * tried[-1], cfg.solver.refine_up_to)
-        cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", elements)]), SCENES)
-        resumed = None
-        if refine_from == "trip" and elements == 2 * tried[-1] and not extra:
-            resumed = refined_from_trip(result, origin, build(cfg), want_topology,
-                                        cfg.solver.max_steps)
-        result = resumed if resumed is not None else once(cfg)[1]
-        tried.append(elements)
-    if len(tried) > 1:
-        result.diagnostics["refined_from"] = tried[:-1]
-        result.diagnostics["wall_time_before_refining"] = wall_before
+    def refined(cfg) -> tuple[Problem, RunResult, list[int], float]:
+        """The run of `cfg`, refined as solver.refine_up_to allows: (its problem as it
+        started, its result, the element counts tried, the wall time of the runs not kept)."""
+        tried = [cfg.rod.elements]
+        refine_from = cfg.solver.refine_from
+        origin, result = once(cfg)
+        wall_before = 0.0
+        # A rod turned by > 135° between neighbouring frames needs more elements, not a
+        # smaller step, and so does one sheared by > 45° (a snap into a loop as tight as the
+        # rod, at Fig 3's top edge: at n = 80 15 of 200 points, at n = 140 1 of 40): with
+        # solver.refine_up_to, run it again with twice as many (up to that number): with
+        # solver.refine_from "trip" from a second before the trip (refined_from_trip), else,
+        # or if the trip came sooner, from the start. A run started from a stored state has
+        # the stored rod's elements and cannot refine; a continuation refines from the start.
+        while (result.diagnostics.get("guard") in REFINABLE_GUARDS and stored is None
+               and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
+            wall_before += result.diagnostics["wall_time"]
+            elements = min(2 * tried[-1], cfg.solver.refine_up_to)
+            cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", elements)]),
+                                   SCENES)
+            resumed = None
+            if refine_from == "trip" and elements == 2 * tried[-1] and not extra:
+                resumed = refined_from_trip(result, origin, build(cfg), want_topology,
+                                            cfg.solver.max_steps)
+            result = resumed if resumed is not None else once(cfg)[1]
+            tried.append(elements)
+        if len(tried) > 1:
+            result.diagnostics["refined_from"] = tried[:-1]
+            result.diagnostics["notes"].append(
+                f"under-resolved at {', '.join(map(str, tried[:-1]))} elements; this is the "
+                f"run with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to})")
+        return origin, result, tried, wall_before
+
+    origin, result, tried, wall_before = refined(cfg)
+    rates = [cfg.loading.twist_rate]
+    floor = cfg.solver.slow_down_to
+    while (floor > 0 and stored is None and not extra
+           and result.diagnostics.get("guard") in SLOWABLE_GUARDS
+           and _turning(origin, len(result.diagnostics["stages"]) - 1)
+           and rates[-1] / 2 >= floor * (1 - 1e-9)):
+        wall_before += result.diagnostics["wall_time"]  # its coarser tries are in already
+        stopped = (f"the {result.diagnostics['guard']} guard stopped it at "
+                   f"{result.diagnostics['elements']} elements while an end turned at "
+                   f"{rates[-1]:g} turns/s")
+        rates.append(rates[-1] / 2)
+        slower = C.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
+        origin, result, more, before = refined(C.validate_scene(slower, SCENES))
+        wall_before += before
+        tried += more
         result.diagnostics["notes"].append(
-            f"under-resolved at {', '.join(map(str, tried[:-1]))} elements; this is the run "
-            f"with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to})")
+            f"{stopped}; this is the run at {rates[-1]:g} turns/s, from the start "
+            f"(solver.slow_down_to = {floor:g})")
+    if len(rates) > 1:
+        result.diagnostics["twist_rates_tried"] = rates
+    if len(tried) > 1:
+        result.diagnostics["wall_time_before_refining"] = wall_before
     return result
+
+
+def _turning(problem: Problem, stage: int) -> bool:
+    """Whether stage `stage` of `problem` turns an end: its rotation tables move."""
+    controls = problem.stages[stage].controls or problem.controls
+    return any(len(set(table[1])) > 1
+               for table in (controls.end_rotation, controls.start_rotation))
 
 
 def cpu_seconds() -> float:

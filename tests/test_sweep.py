@@ -458,3 +458,32 @@ def test_the_sobol_sampler_leaves_no_part_of_fig3s_box_empty_and_keeps_its_prefi
     # the same seed draws the same points, and a shorter sweep is the longer one's start
     # (studies that run the first k points of Fig 3 rely on it)
     assert np.array_equal(SAMPLERS["sobol"](axes, 50, 2020), unit["sobol"][:50])
+
+
+def test_a_run_stopped_while_its_end_turns_too_fast_is_run_again_slower():
+    # Φa = 1.0 on 48 elements twisted at 32 turns/s: the end frame falls more than 135°
+    # behind its clamp (clamp_lag); at 16 turns/s the twist piles up at the turning end
+    # faster than it spreads (the resolution guard); at 8 turns/s the run completes. With
+    # solver.slow_down_to = 8 the same point is run at 32, 16 and 8 turns/s and ends `ok`,
+    # with all its twist in; with 16 it stops at 16, still failed.
+    overrides = [("rod.elements", 48), ("loading.twist_density", 1.0),
+                 ("loading.twist_rate", 32.0), ("solver.hold_until", "time"),
+                 ("solver.hold_max_time", 0.5), ("output.topology", False)]
+    fast = run_scene(C.load_scene("twist_under_load", overrides, SCENES).plain())
+    assert fast.status == "unstable" and fast.diagnostics["guard"] == "clamp_lag"
+    assert "twist_rates_tried" not in fast.diagnostics
+    cfg = C.load_scene("twist_under_load", overrides + [("solver.slow_down_to", 8.0)], SCENES)
+    slowed = run_scene(cfg.plain())
+    assert slowed.status == "ok", slowed.message
+    assert slowed.diagnostics["twist_rates_tried"] == [32.0, 16.0, 8.0]
+    assert slowed.diagnostics["wall_time_before_refining"] > 0
+    assert "resolution guard stopped it at 48 elements while an end turned at 16 turns/s" \
+        in slowed.diagnostics["notes"][-1]
+    assert slowed.history["end_rotation"][-1] == pytest.approx(1.0 * cfg.rod.length / cfg.rod.radius)
+    # the twist of the slower run takes twice as long: 40/2π turns at 8 turns/s
+    twist = slowed.diagnostics["stages"][1]
+    assert twist["label"].startswith("twist") and twist["end_time"] > 0.7
+    floor = run_scene(C.load_scene("twist_under_load",
+                                   overrides + [("solver.slow_down_to", 16.0)], SCENES).plain())
+    assert floor.status == "unstable" and floor.diagnostics["twist_rates_tried"] == [32.0, 16.0]
+    assert floor.diagnostics["guard"] == "resolution"
