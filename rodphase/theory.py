@@ -121,7 +121,17 @@ def stretched_greenhill_turns(tension: float, extension: float, length: float, b
     """The clamped Greenhill twist [turns] of a rod of rest length `length`, rest bending and
     twist stiffnesses `bending`, `twist` [N m²], stretched to `extension` e by `tension` [N]
     with the paper's incompressible thinning (B/e², C/e² at length e·L0), unshearable:
-    θ_c = M_c(T, e·L0, B/e²)·e·L0/(C/e²)."""
+    θ_c = M_c(T, e·L0, B/e²)·e·L0/(C/e²). sheared_greenhill_turns at S = ∞."""
+    return sheared_greenhill_turns(tension, extension, length, bending, twist, math.inf)
+
+
+def sheared_greenhill_turns(tension: float, extension: float, length: float, bending: float,
+                            twist: float, shear: float) -> float:
+    """The clamped Greenhill twist [turns] of a shearable rod of rest length `length`, rest
+    bending and twist stiffnesses `bending`, `twist` [N m²] and shear stiffness `shear` [N],
+    stretched to `extension` e by `tension` [N] under the paper's law: B/e², C/e² at length
+    e·L0, and S unchanged (its force's 1/e cancels the e of its shear strain per rest
+    length: sheared_greenhill_clamped_moment), θ_c = M_c(T, e·L0, B/e², S)·e·L0/(C/e²)."""
     e = extension
-    moment = greenhill_clamped_moment(tension, e * length, bending / e**2)
+    moment = sheared_greenhill_clamped_moment(tension, e * length, bending / e**2, shear)
     return moment * e * length / (twist / e**2) / units.TURN
