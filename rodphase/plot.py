@@ -168,8 +168,9 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
     caller's other panels) and the colour bar takes its room from `ax`. `caption` is a line
     under the figure (the sweep's parameters); `size` is (width, height) in inches or
     "column" / "page" (a journal's single column, full width). `onset` (tabulate.onset_lines)
-    draws the straight rod's buckling twist: the model's own (solid) and the unsheared
-    clamped Greenhill twist (dashed), on the same twist axis.
+    draws the straight rod's buckling twist: the model's own (solid), the sheared clamped
+    Greenhill twist (its n → ∞ limit, dotted blue) and the unsheared one (dashed), on the
+    same twist axis.
     """
     if "extension" not in table.columns:
         raise ValueError(f"phase_map needs the column 'extension'; the table has "
@@ -236,11 +237,18 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
         if onset is not None and len(onset):
             reading = "current" if twist == "phi_a_current" else "rest"
             n = onset.attrs.get("elements")
-            for column, style, label in (
-                    ("model", "-", "onset, model" + (f" n = {n}" if n else "")),
-                    ("greenhill", "--", "Greenhill, unsheared")):
+            # the sheared line is the model's n → ∞ limit and close to it (0.2 % for the
+            # paper's rod at n = 160): dotted, in colour, over the solid model line, so that
+            # both stay visible
+            for column, style, colour, label in (
+                    ("model", "-", "0.15", "onset, model" + (f" n = {n}" if n else "")),
+                    ("sheared", ":", BLUE, "Greenhill, sheared (analytic)"),
+                    ("greenhill", "--", "0.15", "Greenhill, unsheared")):
+                if f"{column}_{reading}" not in onset:  # a caller's table with fewer lines
+                    continue
                 handles += ax.plot(*_smooth(onset["extension"], onset[f"{column}_{reading}"]),
-                                   style, color="0.15", lw=1.0, zorder=1, label=label)
+                                   style, color=colour, lw=1.0 if style != ":" else 1.4,
+                                   zorder=1, label=label)
 
         ax.set_ylabel(TWIST_DENSITY_LABEL if twist != "phi_a_current" else
                       r"twist density $\Phi a$ of the stretched rod (rad)")
@@ -256,8 +264,11 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
         bar.ax.text(0.5, 1.02, "solenoid", transform=bar.ax.transAxes, ha="center",
                     va="bottom", fontsize=end_size)
         if handles and own:
+            # four columns of the onset lines' long labels are wider than the figure
+            long = any(len(h.get_label()) > 24 for h in handles)
             fig.legend(handles=handles, loc="outside upper center",
-                       ncols=min(len(handles), 2 if small else (3 if len(handles) > 6 else 4)),
+                       ncols=min(len(handles), 2 if small else
+                                 (3 if len(handles) > 6 or long else 4)),
                        frameon=False,
                        handletextpad=0.3, columnspacing=1.2)
         elif handles:

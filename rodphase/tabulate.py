@@ -135,14 +135,15 @@ def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
 def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
     """The straight rod's buckling twist along `extensions` (L/L0) for the scene of a store's
     resolved config (its `scene` section): the model's own onset (rod/onset.py: the perfect
-    discrete rod at the scene's resolution, with its shear and stretch) and the unsheared
-    clamped Greenhill twist, each as the rest Φa = θ·a0/L0 (`model_rest`, `greenhill_rest`)
-    and as the stretched rod's (`model_current`, `greenhill_current`). None for a scene whose
+    discrete rod at the scene's resolution, with its shear and stretch), the sheared clamped
+    Greenhill twist (the same rod's n → ∞ limit) and the unsheared one, each as the rest
+    Φa = θ·a0/L0 (`model_rest`, `sheared_rest`, `greenhill_rest`) and as the stretched rod's
+    (`model_current`, `sheared_current`, `greenhill_current`). None for a scene whose
     rod is not clamped at both ends under an end load, or whose resolved config is not there
     (the onset is for that rod only). Where the rod has too few elements to resolve its onset
     the model's line is NaN (left out)."""
     from .rod.model import Rod
-    from .rod.onset import greenhill_turns, straight_onset_turns
+    from .rod.onset import greenhill_turns, sheared_greenhill_turns, straight_onset_turns
 
     scene = config.get("scene") if isinstance(config.get("scene"), dict) else config
     try:
@@ -172,13 +173,19 @@ def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
         except ValueError:  # too few elements to resolve that twist: no line there
             return np.nan
 
+    def sheared_onset(extension: float) -> float:
+        try:
+            return sheared_greenhill_turns(rod, extension)
+        except ValueError:  # tension at or above the shear stiffness: no sheared line there
+            return np.nan
+
     model = np.array([model_onset(v) for v in e])
+    sheared = np.array([sheared_onset(v) for v in e])
     greenhill = np.array([greenhill_turns(rod, v) for v in e])
     to_phi = units.TURN * rod.radius / rod.length  # turns -> rest Φa
-    lines = pd.DataFrame({
-        "extension": e,
-        "model_rest": model * to_phi, "greenhill_rest": greenhill * to_phi,
-        "model_current": units.current_twist_density(model * to_phi, e),
-        "greenhill_current": units.current_twist_density(greenhill * to_phi, e)})
+    lines = pd.DataFrame({"extension": e})
+    for name, turns in (("model", model), ("sheared", sheared), ("greenhill", greenhill)):
+        lines[f"{name}_rest"] = turns * to_phi
+        lines[f"{name}_current"] = units.current_twist_density(turns * to_phi, e)
     lines.attrs["elements"] = rod.elements
     return lines

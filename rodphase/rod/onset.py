@@ -7,7 +7,9 @@ stable up to the twist θ_c at which a pair of helical modes crosses zero stiffn
 is found here from the discrete model's own stiffness (rod/static.py), so it carries
 everything the model has: shear, extensibility, the 1/e and 1/e³ factors of the law, the
 clamps' half elements and the resolution. The clamped Greenhill twist (theory.py) is its
-limit for an unshearable, inextensible rod and n → ∞ (tests/test_onset.py).
+limit for an unshearable, inextensible rod and n → ∞ (tests/test_onset.py); the sheared
+clamped Greenhill twist (sheared_greenhill_turns) is its n → ∞ limit for the paper's rod
+as it is, shear and stretch included (tests/test_theory_shear.py).
 
 On the straight branch the lateral unknowns (node displacements across the axis, frame
 rotations about d1 and d2) decouple to first order from the axial and twist ones, and the
@@ -213,6 +215,17 @@ def greenhill_turns(rod: Rod, extension: float) -> float:
     tension = rod.axial_stiffness * (1.0 - 1.0 / extension)
     return stretched_greenhill_turns(tension, extension, rod.length, rod.bending_stiffness,
                                      rod.twist_stiffness)
+
+
+def sheared_greenhill_turns(rod: Rod, extension: float) -> float:
+    """The clamped Greenhill twist [turns] of the rod stretched to `extension` under the
+    paper's law, with its shear stiffness (theory.sheared_greenhill_turns): the n → ∞ limit
+    of straight_onset_turns for the paper's law (tests/test_theory_shear.py)."""
+    from ..theory import sheared_greenhill_turns as turns
+
+    tension = rod.axial_stiffness * (1.0 - 1.0 / extension)
+    return turns(tension, extension, rod.length, rod.bending_stiffness, rod.twist_stiffness,
+                 rod.shear_stiffness)
 
 
 def compile_static() -> None:
