@@ -89,8 +89,9 @@ def settings(case: str) -> dict:
 
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path) -> None:
     import elastica as ea
-    from _common import machine
     from elastica._rotations import _get_rotation_matrix
+
+    from rodphase.studytools import machine
 
     c = settings(case)
     if final_time is not None:
@@ -387,10 +388,9 @@ def build_problem(case: str, sets, twist: str, kick: str, kick_scale: float = 1.
 def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
                  out: Path, bodies: str = "none", kick_scale: float = 1.0,
                  reference: Path | None = None) -> dict:
-    from _common import machine
-
     from rodphase import classify
     from rodphase.runner import run
+    from rodphase.studytools import machine
     from rodphase.topology import topology_history
 
     sets = rodphase_sets(case, contact, dt, rotation_damping, bodies)

@@ -37,7 +37,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import machine, write_block
+from rodphase.studytools import machine, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "perf"
@@ -358,7 +358,6 @@ def main():
     if args.config is not None:
         global CONFIG
         CONFIG = args.config.resolve()
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     if args.step == "savings":
         if not args.resume:  # --resume: retabulate the stored measurements
             _save("savings", savings())

@@ -1413,8 +1413,7 @@ def main(argv=None) -> int:
     print()
     print(text)
     if args.write:
-        sys.path.insert(0, str(SCRIPT.parent))
-        from _common import write_block
+        from rodphase.studytools import write_block
 
         write_block(args.write, "robustness", text)
     if args.workdir is None:

@@ -49,7 +49,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
 from scipy.spatial.transform import Rotation
 
 from rodphase.rod import (
@@ -64,6 +63,7 @@ from rodphase.rod import (
     stable_time_step,
     straight_state,
 )
+from rodphase.studytools import machine, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -42,7 +42,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
 from numba import njit
 
 import rodphase
@@ -51,6 +50,7 @@ from rodphase.rod import contact as K
 from rodphase.rod.simulate import _rod_arrays
 from rodphase.runner import run_scene
 from rodphase.scenes import build
+from rodphase.studytools import machine, write_block
 
 REPEATS = 7
 

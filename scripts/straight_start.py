@@ -30,7 +30,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, same_points, sweep_table, write_block
+
+from rodphase.studytools import machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "straight"

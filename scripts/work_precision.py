@@ -41,7 +41,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
 
 from rodphase.rod import (
     Controls,
@@ -55,6 +54,7 @@ from rodphase.rod import (
     simulate,
     straight_state,
 )
+from rodphase.studytools import machine, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 from rodphase.theory import greenhill_clamped_moment
