@@ -35,34 +35,34 @@ test: $(STAMP)  ## run the test suite
 	$(BIN)/pytest -q
 
 lint: $(STAMP)  ## static checks (ruff)
-	$(BIN)/ruff check rodphase tests scripts
+	$(BIN)/ruff check rodphase tests benchmarks studies
 
 bench: $(STAMP)  ## kernel and topology benchmarks against PyElastica (installs the bench extra)
 	$(BIN)/pip install --quiet -e ".[bench]"
-	$(BIN)/python scripts/bench_kernel.py --write docs/benchmarks.md
-	$(BIN)/python scripts/bench_topology.py
+	$(BIN)/python benchmarks/bench_kernel.py --write docs/benchmarks.md
+	$(BIN)/python benchmarks/bench_topology.py
 
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3_stretched.h5 --csv $(OUT)/fig3_stretched.csv
 	$(BIN)/rodphase plot $(OUT)/fig3_stretched.h5 --kind phase --twist current -o $(OUT)/fig3_stretched.png
-	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_stretched.csv --column phi_a_current --above 1.1
+	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_stretched.csv --column phi_a_current --above 1.1
 
 fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, with the Phi_c fit
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_paper.yaml -o $(OUT)/fig3_paper.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3_paper.h5 --csv $(OUT)/fig3_paper.csv
 	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
-	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
+	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
 
 figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)
-	$(BIN)/python scripts/figures.py --out $(OUT) --jobs $(JOBS)
+	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
 
 onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/reproduction.md)
-	$(BIN)/python scripts/onset_study.py --write
+	$(BIN)/python studies/onset_study.py --write
 
 clean:  ## remove outputs (keeps .venv)
 	rm -rf $(OUT) .pytest_cache
 
-include scripts/figures.mk
+include studies/figures.mk

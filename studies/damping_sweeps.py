@@ -1,16 +1,16 @@
 """Holds that settle (issue #13): the shipped defaults against the implicit damping settings.
 
-    python scripts/damping_sweeps.py speed   [--steps 4000 --rounds 5]
-    python scripts/damping_sweeps.py demo    [--out DIR]
-    python scripts/damping_sweeps.py figures [--out DIR] [--only figS9,fig4a]
-    python scripts/damping_sweeps.py fig3    [--out DIR] [--samples 40]
+    python studies/damping_sweeps.py speed   [--steps 4000 --rounds 5]
+    python studies/damping_sweeps.py demo    [--out DIR]
+    python studies/damping_sweeps.py figures [--out DIR] [--only figS9,fig4a]
+    python studies/damping_sweeps.py fig3    [--out DIR] [--samples 40]
 
 Each command runs the same work with every variant of VARIANTS (the `--set` overrides that
 turn the new terms on) and prints one line per variant; `--variants` picks some.
 `speed` is the kernel's CPU time per step on a solenoid in contact, variants interleaved in
 one process round by round (min and median of the rounds), so that a change of load on a
 shared machine hits them alike. `demo` counts the statuses of configs/quick.yaml's 24 runs.
-`figures` runs scripts/figures.py for each variant into DIR/<variant>/ and reads back the
+`figures` runs studies/figures.py for each variant into DIR/<variant>/ and reads back the
 numbers docs/reproduction.md quotes (every run's status, Fig S9's last hold, Fig 4a's force
 noise, Fig 2b's writhe per solenoid turn). `fig3` times the first --samples points of
 configs/fig3_paper.yaml per variant, interleaved in chunks, and counts their phases.
@@ -128,7 +128,7 @@ def _statuses(path) -> list[str]:
 def figures(variants, out: Path, only: str) -> None:
     for name in variants:
         folder = out / name
-        cmd = [sys.executable, str(ROOT / "scripts/figures.py"), "--out", str(folder), "--jobs", "1"]
+        cmd = [sys.executable, str(ROOT / "studies/figures.py"), "--out", str(folder), "--jobs", "1"]
         if only:
             cmd += ["--only", only]
         for key, value in VARIANTS[name]:

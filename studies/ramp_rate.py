@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Fig 3's twist ramp faster: labels and cost at several twist rates against a fine reference.
 
-    python scripts/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/performance.md]
+    python studies/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/performance.md]
 
 Most of a Fig 3 sweep's steps are in the twist ramp (81 % of 40 M at 0.5 turns/s, issue #16).
 A faster ramp costs fewer steps but can overshoot the onset (a dynamic buckling lags the

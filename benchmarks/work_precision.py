@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Work-precision: error against CPU time over the number of elements n and the time step.
 
-    python scripts/work_precision.py [--only stretch,cantilever,greenhill,writhe] [--quick]
+    python benchmarks/work_precision.py [--only stretch,cantilever,greenhill,writhe] [--quick]
                                      [--write docs/performance.md]
 
 Reference problems (the setups of tests/test_rod.py):

@@ -1,6 +1,6 @@
 """Critical twist density against extension from a classified sweep (paper Fig 3).
 
-    python scripts/critical_twist.py TABLE.csv [--column phi_a_rest] [--above 1.1]
+    python studies/critical_twist.py TABLE.csv [--column phi_a_rest] [--above 1.1]
 
 Bins the runs by extension L/L0; in each bin the critical Φa is the midpoint between the
 largest Φa still straight and the smallest Φa that buckled (any non-straight phase). A

@@ -1,6 +1,6 @@
 """Hat curves from a store (scene hat_curve, or the sweep configs/hat_forces.yaml).
 
-    python scripts/hat_curve.py OUT.h5 [--plot DIR]
+    python studies/hat_curve.py OUT.h5 [--plot DIR]
 
 Per run: the force; the buckling torque on the way up (the peak |end torque| before the
 writhe first exceeds 0.2 turns) against the

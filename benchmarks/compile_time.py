@@ -1,8 +1,8 @@
 """First-compile cost: `make demo` and `rodphase run` on an empty numba cache, and where it goes.
 
-    python scripts/compile_time.py demo --repeats 2      # the steps of `make demo`, cold cache
-    python scripts/compile_time.py run --repeats 2       # `rodphase run twist_under_load`, cold
-    python scripts/compile_time.py functions             # seconds per compiled function
+    python benchmarks/compile_time.py demo --repeats 2      # the steps of `make demo`, cold cache
+    python benchmarks/compile_time.py run --repeats 2       # `rodphase run twist_under_load`, cold
+    python benchmarks/compile_time.py functions             # seconds per compiled function
 
 Every repeat gets a new, empty NUMBA_CACHE_DIR (removed afterwards), so nothing is loaded
 from an earlier compile: neither from a cache dir nor from the __pycache__ next to the

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Fig 3 with and without the quasi-static straight start: cost, and how much the results move.
 
-    python scripts/straight_start.py [--samples 200] [--rounds 2] [--variants 0,0.8]
+    python studies/straight_start.py [--samples 200] [--rounds 2] [--variants 0,0.8]
         [--set KEY=VALUE ...] [--reference out/perf/fig3_ref.h5] [--write docs/performance.md]
 
 Each variant is `rodphase sweep configs/fig3_paper.yaml --set loading.quasi_static_below=S`
@@ -11,7 +11,7 @@ machine's changing load falls on all of them alike; every sweep writes a fresh s
 variant: steps summed over the runs (the load-free measure of work), sweep wall time (each
 round), statuses, and, point by point against S = 0, the labels and the largest differences
 of writhe, link and final extension; against the fine reference sweep (n = 140, safety 0.25,
-whole protocol: `scripts/phase_timing.py reference`), the labels of the points it has.
+whole protocol: `benchmarks/phase_timing.py reference`), the labels of the points it has.
 Stores go to out/straight/.
 """
 

@@ -1,6 +1,6 @@
 """Which part of the model sustains the standing vibration of a rod held in self-contact?
 
-    python scripts/vibration_source.py            # ~1 min on one core
+    python studies/vibration_source.py            # ~1 min on one core
 
 Runs the Fig 2b solenoid scene (rodphase/configs/scenes/fig2b_solenoid.yaml) to its settled
 hold, then holds that final shape again from rest for 4 s, with the same load and contact,

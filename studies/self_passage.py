@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Where did a run's link go? Each link jump of a twist_under_load point, located.
 
-    python scripts/self_passage.py --twist-density 2.556 --extension 1.265 [--elements 80]
+    python studies/self_passage.py --twist-density 2.556 --extension 1.265 [--elements 80]
         [--interval 1e-3] [--set KEY=VALUE ...]
 
 The runner books every change of Lk that the clamps did not put in as an escape (a strand

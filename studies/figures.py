@@ -1,4 +1,4 @@
-"""Run the paper's scenes and draw their figures: `python scripts/figures.py --out DIR`.
+"""Run the paper's scenes and draw their figures: `python studies/figures.py --out DIR`.
 
 Each figure is one or two shipped scenes (rodphase/configs/scenes/). Its runs go to
 DIR/<fig>.h5 (one group per run, readable with `rodphase plot`), its pictures to

@@ -7,10 +7,10 @@ The settings are those of GazzolaLab/PyElastica (commit 024194e0959f85a22710acff
 
 re-expressed here (the settings carry over, the code is written anew) for PyElastica 1.0.
 
-    python scripts/crosscheck_pyelastica.py reference solenoid     # ~20-60 min on one core
-    python scripts/crosscheck_pyelastica.py reference plectoneme   # ~1 h on one core
-    python scripts/crosscheck_pyelastica.py rodphase solenoid      # minutes
-    python scripts/crosscheck_pyelastica.py compare solenoid       # table + docs/img/crosscheck_solenoid.png
+    python studies/crosscheck_pyelastica.py reference solenoid     # ~20-60 min on one core
+    python studies/crosscheck_pyelastica.py reference plectoneme   # ~1 h on one core
+    python studies/crosscheck_pyelastica.py rodphase solenoid      # minutes
+    python studies/crosscheck_pyelastica.py compare solenoid       # table + docs/img/crosscheck_solenoid.png
 
 `reference` keeps every 0.05 s frame in /tmp/crosscheck_raw_CASE.npz (MBs) and writes the
 reduced record tests/data/crosscheck_CASE.npz (0.5 s samples, final shape; < 300 kB).
