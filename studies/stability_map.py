@@ -351,7 +351,7 @@ def plot(data: dict, path: Path) -> None:
 
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--quick", action="store_true")
@@ -360,7 +360,7 @@ def main():
     parser.add_argument("--replot", action="store_true", help="redraw and retabulate from --json")
     parser.add_argument("--json", type=Path, default=ROOT / "out" / "perf" / "stability_map.json")
     parser.add_argument("--png", type=Path, default=ROOT / "docs" / "img" / "stability_map.png")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.replot:
         data = json.loads(args.json.read_text())
     else:
