@@ -6,7 +6,9 @@ one or two points, fractions of a second of hold), and checks that it wrote what
 here: the studies measure it at full size, the other tests check it. A study that pins
 thread counts in the environment when imported, or drives `rodphase` commands, runs in its
 own process; the others are imported by path and called, which shares numba's loaded
-kernels. All of them together take about 35 s on 2 cores with a warm numba cache.
+kernels. All of them together took 41-47 s on a shared 2-core AMD EPYC with numba's cache
+warm, 60 % of it in ramp_rate and straight_start: each of their sweeps is a `rodphase sweep`
+process with a worker process of its own, and each process imports numpy, scipy and numba.
 
 Run small elsewhere: studies/onset_study.py by tests/test_onset.py
 (test_the_onset_study_runs_small_and_writes_its_block), studies/robustness.py by
