@@ -6,10 +6,13 @@ STAMP   = $(VENV)/.installed
 OUT    ?= out
 JOBS   ?= 2
 
-.PHONY: help install demo test lint bench figures phase fig3 onset-study clean
+.PHONY: help install demo test lint clean
 
+##@ Use
 help:  ## list the targets
-	@grep -hE '^[A-Za-z0-9 -]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
+	@awk -F':.*## ' '/^##@ / {printf "%s%s\n", (headings++ ? "\n" : ""), substr($$0, 5); next} \
+		/^[A-Za-z0-9 -]+:.*## / {if (length($$1) > 20) printf "  make %s\n  %-25s %s\n", $$1, "", $$2; \
+		else printf "  make %-20s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
 
 # constraints.txt pins the versions the documented numbers were measured with (pip freeze of
 # a working install); `make install CONSTRAINTS=` installs the newest instead
@@ -35,34 +38,139 @@ test: $(STAMP)  ## run the test suite
 	$(BIN)/pytest -q
 
 lint: $(STAMP)  ## static checks (ruff)
-	$(BIN)/ruff check rodphase tests scripts
+	$(BIN)/ruff check rodphase tests benchmarks studies
 
-bench: $(STAMP)  ## kernel and topology benchmarks against PyElastica (installs the bench extra)
+clean:  ## remove outputs (keeps .venv)
+	rm -rf $(OUT) .pytest_cache
+
+##@ Benchmarks (benchmarks/; the timings depend on the machine and its load, see docs/benchmarks.md)
+# `make bench` is the four that docs/benchmarks.md reports; each script also has its own target.
+.PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
+	bench-interleaved bench-laws bench-step-parts bench-work-precision bit-identical base-tree
+BASE ?= main
+BASE_TREE = $(OUT)/base-rodphase
+
+bench: bench-kernel bench-topology bench-map bench-compile  ## kernel and topology against PyElastica, Fig 3 map time, compile time (installs the bench extra)
+
+bench-extra: $(STAMP)
 	$(BIN)/pip install --quiet -e ".[bench]"
-	$(BIN)/python scripts/bench_kernel.py --write docs/benchmarks.md
-	$(BIN)/python scripts/bench_topology.py
 
+bench-kernel: bench-extra  ## µs per step against PyElastica 1.0, into docs/benchmarks.md
+	$(BIN)/python benchmarks/bench_kernel.py --write docs/benchmarks.md
+
+bench-topology: bench-extra  ## link, twist and writhe per frame against PyElastica's knot_theory
+	$(BIN)/python benchmarks/bench_topology.py
+
+bench-map: $(STAMP)  ## Fig 3's sweep timed, labels against a finer reference, per-scene savings (docs/)
+	$(BIN)/python benchmarks/phase_timing.py savings --write docs/performance.md
+	$(BIN)/python benchmarks/phase_timing.py reference --samples 40
+	$(BIN)/python benchmarks/phase_timing.py timing
+	$(BIN)/python benchmarks/phase_timing.py compare --write docs/performance.md --write docs/benchmarks.md
+
+bench-compile: $(STAMP)  ## first compile on an empty numba cache: make demo's steps, then per function
+	$(BIN)/python benchmarks/compile_time.py demo --jobs $(JOBS)
+	$(BIN)/python benchmarks/compile_time.py functions
+
+bench-overhead: $(STAMP)  ## what a stored run costs beyond its simulation (2,000 tiny runs)
+	$(BIN)/python benchmarks/bench_overhead.py --jobs $(JOBS)
+
+# BASE's rodphase (a branch, tag or commit; default main), extracted for a before/after check
+base-tree:
+	rm -rf $(BASE_TREE) && mkdir -p $(BASE_TREE)
+	git archive $(BASE) rodphase | tar -x -C $(BASE_TREE)
+
+bench-interleaved: $(STAMP) base-tree  ## kernel CPU µs/step of BASE (default main) and this tree, interleaved
+	$(BIN)/python benchmarks/bench_interleaved.py $(abspath $(BASE_TREE)) $(CURDIR)
+
+bench-laws: $(STAMP)  ## µs per step of the paper's law and the neo-Hookean one, interleaved
+	$(BIN)/python benchmarks/bench_laws.py
+
+bench-step-parts: $(STAMP)  ## where a Fig 3 step goes; what a Newton iteration would cost (docs/performance.md)
+	$(BIN)/python benchmarks/step_parts.py --write docs/performance.md
+
+bench-work-precision: $(STAMP)  ## error against CPU time over n and dt (docs/performance.md, ~7 min)
+	$(BIN)/python benchmarks/work_precision.py --write docs/performance.md
+
+bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tree bit-identical to BASE (default main)?
+	PYTHONPATH=$(abspath $(BASE_TREE)) $(BIN)/python benchmarks/reference_positions.py $(OUT)/positions_base.npz
+	PYTHONPATH=$(CURDIR) $(BIN)/python benchmarks/reference_positions.py $(OUT)/positions_here.npz
+	$(BIN)/python benchmarks/reference_positions.py --compare $(OUT)/positions_base.npz $(OUT)/positions_here.npz
+
+##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
+.PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
+	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
+	robustness
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3_stretched.h5 --csv $(OUT)/fig3_stretched.csv
 	$(BIN)/rodphase plot $(OUT)/fig3_stretched.h5 --kind phase --twist current -o $(OUT)/fig3_stretched.png
-	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_stretched.csv --column phi_a_current --above 1.1
+	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_stretched.csv --column phi_a_current --above 1.1
 
 fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, with the Phi_c fit
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_paper.yaml -o $(OUT)/fig3_paper.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/rodphase classify $(OUT)/fig3_paper.h5 --csv $(OUT)/fig3_paper.csv
 	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
-	$(BIN)/python scripts/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
+	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
 
 figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)
-	$(BIN)/python scripts/figures.py --out $(OUT) --jobs $(JOBS)
+	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
 
 onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/reproduction.md)
-	$(BIN)/python scripts/onset_study.py --write
+	$(BIN)/python studies/onset_study.py --write
 
-clean:  ## remove outputs (keeps .venv)
-	rm -rf $(OUT) .pytest_cache
+hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/reproduction.md)
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase run hat_curve -o $(OUT)/hat.h5
+	$(BIN)/rodphase plot $(OUT)/hat.h5 --kind hat -o $(OUT)/hat.png
+	$(BIN)/python studies/hat_curve.py $(OUT)/hat.h5
+	$(BIN)/rodphase sweep configs/hat_forces.yaml -o $(OUT)/hat_forces.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/python studies/hat_curve.py $(OUT)/hat_forces.h5 --plot $(OUT)/hat_forces
 
-include scripts/figures.mk
+stability-map: $(STAMP)  ## largest stable dt against the bound (docs/performance.md and its figure)
+	$(BIN)/python studies/stability_map.py --json $(OUT)/perf/stability_map.json --write docs/performance.md
+
+damping-sweeps: $(STAMP)  ## holds that settle: the damping variants on the figures, the demo, Fig 3 (reproduction.md)
+	$(BIN)/python studies/damping_sweeps.py speed
+	$(BIN)/python studies/damping_sweeps.py demo --out $(OUT)/damping
+	$(BIN)/python studies/damping_sweeps.py figures --out $(OUT)/damping
+	$(BIN)/python studies/damping_sweeps.py fig3 --out $(OUT)/damping
+
+ramp-rate: $(STAMP)  ## Fig 3's twist ramp at several rates against a fine reference (docs/performance.md)
+	$(BIN)/python studies/ramp_rate.py --rates 0.25,0.5,1,2 --jobs $(JOBS) --out $(OUT)/ramp --write docs/performance.md
+
+# the random sweep is fig3's; the reference (24 x 24 by continuation) and the adaptive one are its own
+boundary-error: fig3  ## phase-boundary error of random and adaptive sampling against a 24 x 24 reference
+	$(BIN)/rodphase sweep configs/fig3_paper_reference.yaml -o $(OUT)/fig3_paper_reference.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/rodphase classify $(OUT)/fig3_paper_reference.h5 --csv $(OUT)/fig3_paper_reference.csv
+	$(BIN)/rodphase sweep configs/fig3_paper_adaptive.yaml -o $(OUT)/fig3_paper_adaptive.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/rodphase classify $(OUT)/fig3_paper_adaptive.h5 --csv $(OUT)/fig3_paper_adaptive.csv
+	$(BIN)/python studies/boundary_error.py $(OUT)/fig3_paper_reference.csv $(OUT)/fig3_paper.csv $(OUT)/fig3_paper_adaptive.csv
+
+# CASE=solenoid or plectoneme; against the PyElastica run stored in tests/data
+CASE ?= solenoid
+crosscheck: $(STAMP)  ## PyElastica's own example CASE (default solenoid) in rodphase, compared (docs/img/crosscheck_CASE.png)
+	@mkdir -p $(OUT)
+	$(BIN)/python studies/crosscheck_pyelastica.py rodphase $(CASE) $(if $(filter plectoneme,$(CASE)),--end-bodies rod) -o $(OUT)/crosscheck_$(CASE).npz
+	$(BIN)/python studies/crosscheck_pyelastica.py compare $(CASE) --rodphase $(OUT)/crosscheck_$(CASE).npz
+
+crosscheck-reference: bench-extra  ## rerun example CASE in PyElastica 1.0 into tests/data (about an hour)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference $(CASE)
+
+straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/performance.md)
+	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/performance.md
+
+# one point of twist_under_load: PHI = Phi*a (rest), EXT = L/L0
+PHI ?= 2.556
+EXT ?= 1.265
+self-passage: $(STAMP)  ## where a run's link went: each link jump of the point PHI, EXT located
+	$(BIN)/python studies/self_passage.py --twist-density $(PHI) --extension $(EXT)
+
+vibration-source: $(STAMP)  ## which part of the model sustains the vibration of a coil held in contact
+	$(BIN)/python studies/vibration_source.py
+
+robustness: $(STAMP)  ## the store under attack: kills, signals, a full disk, bad input (docs/robustness.md)
+	$(BIN)/python studies/robustness.py --kills 60 --write docs/robustness.md
+
+include studies/figures.mk

@@ -1,5 +1,5 @@
 """rodphase against the stored PyElastica 1.0 run of the authors' SolenoidsCase example
-(scripts/crosscheck_pyelastica.py, docs/reproduction.md)."""
+(studies/crosscheck_pyelastica.py, docs/reproduction.md)."""
 
 import sys
 from pathlib import Path
@@ -9,7 +9,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 REF = ROOT / "tests" / "data" / "crosscheck_solenoid.npz"
-sys.path.insert(0, str(ROOT / "scripts"))
+sys.path.insert(0, str(ROOT / "studies"))
 
 pytestmark = pytest.mark.slow
 

@@ -262,7 +262,7 @@ def hairpin(rod, closing_speed):
 def test_with_both_off_the_new_paths_change_no_bit():
     # dashpot implicit at ratio 0 adds impulses of exactly 0.0: the run must be bit-identical
     # to the explicit one at ratio 0 (the explicit default itself is pinned by
-    # scripts/reference_positions.py against the code before these terms existed).
+    # benchmarks/reference_positions.py against the code before these terms existed).
     rod = Rod(length=0.6, radius=0.025, elements=24, youngs_modulus=1e4)
     state, ends, curvature = hairpin(rod, 1.0)
     runs = []

@@ -208,12 +208,12 @@ def test_the_phase_maps_onset_lines_are_the_models_and_greenhills():
 
 
 def test_the_onset_study_runs_small_and_writes_its_block(tmp_path):
-    # scripts/onset_study.py (make onset-study) at one extension: its table goes into the docs
+    # studies/onset_study.py (make onset-study) at one extension: its table goes into the docs
     # block (n = 80: G = E/3 doubles the onset twist, which 40 elements cannot resolve)
     import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "studies"))
     import onset_study
 
     docs = tmp_path / "doc.md"

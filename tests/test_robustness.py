@@ -3,7 +3,7 @@
 Black box: every row drives `python -m rodphase.cli` in subprocesses and judges only what a
 user sees (exit status, printed lines) and what `rodphase.store.read_table` /
 `read_store(path).read_run(rid)` return afterwards. The cases live in
-scripts/robustness.py (imported here by path), which also runs them at full strength
+studies/robustness.py (imported here by path), which also runs them at full strength
 (`--kills 60`, the 300-run memory case) and writes the tried/right table into docs.
 
 Rows: kill -9 of the writer at random pwrite64 calls (strace; chains of kills resumed on
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "robustness.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "studies" / "robustness.py"
 _spec = importlib.util.spec_from_file_location("rodphase_robustness", SCRIPT)
 rb = importlib.util.module_from_spec(_spec)
 sys.modules[_spec.name] = rb  # dataclasses look their module up by name
@@ -57,7 +57,7 @@ def lab(tmp_path_factory):
 def test_robustness(lab, case):
     if case.startswith("memory-") and not MEMORY:
         pytest.skip("the 300-run memory case is opt-in (RODPHASE_ROBUSTNESS_MEMORY=1); "
-                    "scripts/robustness.py runs it by default")
+                    "studies/robustness.py runs it by default")
     try:
         rows = CASES[case](lab)
     except rb.Skip as why:

@@ -1,6 +1,6 @@
 """The paper's scenes, as shipped (rodphase/configs/scenes/), on coarse and short versions.
 
-Each test loads the shipped YAML that `scripts/figures.py` runs, makes it coarse (48–64
+Each test loads the shipped YAML that `studies/figures.py` runs, makes it coarse (48–64
 elements, fast twist, short holds) and checks the physical outcome the figure is about, not
 a number that depends on the resolution. Every test runs in a few seconds once numba's
 cache is warm.
@@ -139,7 +139,7 @@ def coil_height(points):
 
 def free_coil_height(cfg, twist_density0, factor):
     """Unloaded coil without contact: a helix of the annealed curvature and the torsion
-    κ3⁰/f − (κ3⁰ − τ0) (see scripts/figures.py, free_coil_height)."""
+    κ3⁰/f − (κ3⁰ − τ0) (see studies/figures.py, free_coil_height)."""
     m = cfg.muscle
     c = m.pitch / TURN
     k = m.helix_radius / (m.helix_radius**2 + c**2)

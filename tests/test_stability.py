@@ -1,6 +1,6 @@
 """The stability guard, pinned against the measured stability limit of explicit stepping.
 
-LIMIT holds the largest stable dt / stable_time_step measured by scripts/stability_map.py
+LIMIT holds the largest stable dt / stable_time_step measured by studies/stability_map.py
 (bisection to 0.5 %, 4000 steps from a straight rod perturbed by strains of ~1e-3, clamped at
 node 0, free at node n; see docs/performance.md). The limit does not depend on E (all rates
 scale with √(E/ρ)), so the table is by n. Each test runs a few thousand steps of a small rod:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Kernel cost of two versions of the code, interleaved: CPU µs per step at n = 150.
 
-    python scripts/bench_interleaved.py OLD_ROOT NEW_ROOT [--rounds 7] [--steps 20000]
+    python benchmarks/bench_interleaved.py OLD_ROOT NEW_ROOT [--rounds 7] [--steps 20000]
                                         [--elements 150 [300 ...]]
 
 OLD_ROOT and NEW_ROOT are directories holding a `rodphase` package (e.g. `git archive main
@@ -15,7 +15,7 @@ rod twisted below its buckling onset without contact; `--cases` adds "straight",
 rod with self-contact switched on (no pair ever touches), "moving", the same
 plectoneme with the damping of PyElastica's PlectonemesCase (2/s, no speed-dependent drag), in
 which the strands keep moving, and "explicit", the held plectoneme with the contact dashpot
-in the force (as scripts/bench_kernel.py runs it) instead of the scene's implicit one. Prints medians and spread (min-max) per
+in the force (as benchmarks/bench_kernel.py runs it) instead of the scene's implicit one. Prints medians and spread (min-max) per
 version and case, and the ratio new/old of the medians. `--elements` runs the same cases at
 other n (each n has its own plectoneme state, made once by OLD's code).
 """

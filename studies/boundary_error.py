@@ -1,6 +1,6 @@
 """Phase-boundary error against run count: adaptive vs random sampling of the Fig 3 box.
 
-    python scripts/boundary_error.py REFERENCE.csv RANDOM.csv ADAPTIVE.csv
+    python studies/boundary_error.py REFERENCE.csv RANDOM.csv ADAPTIVE.csv
 
 Each CSV is a classified table (`rodphase classify X.h5 --csv X.csv`) over the same box and
 axes (the sweep's axis columns, between run_id and status): the reference a dense grid

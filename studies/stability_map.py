@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Stability map: the largest time step explicit stepping survives, against the automatic bound.
 
-    python scripts/stability_map.py [--steps 4000] [--write docs/performance.md] [--quick]
+    python studies/stability_map.py [--steps 4000] [--write docs/performance.md] [--quick]
 
 For every (n, E, damping) the largest stable dt is found by bisection on f = dt / bound, where
 bound = rodphase.rod.stable_time_step (rodphase steps at dt = safety × bound, safety 0.5 by
@@ -49,7 +49,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
 from scipy.spatial.transform import Rotation
 
 from rodphase.rod import (
@@ -64,6 +63,7 @@ from rodphase.rod import (
     stable_time_step,
     straight_state,
 )
+from rodphase.studytools import machine, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -351,7 +351,7 @@ def plot(data: dict, path: Path) -> None:
 
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--quick", action="store_true")
@@ -360,7 +360,7 @@ def main():
     parser.add_argument("--replot", action="store_true", help="redraw and retabulate from --json")
     parser.add_argument("--json", type=Path, default=ROOT / "out" / "perf" / "stability_map.json")
     parser.add_argument("--png", type=Path, default=ROOT / "docs" / "img" / "stability_map.png")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.replot:
         data = json.loads(args.json.read_text())
     else:

@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Fig 3's twist ramp faster: labels and cost at several twist rates against a fine reference.
 
-    python scripts/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/performance.md]
+    python studies/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/performance.md]
+        [--out out/ramp] [--set KEY=VALUE ...]
 
 Most of a Fig 3 sweep's steps are in the twist ramp (81 % of 40 M at 0.5 turns/s, issue #16).
 A faster ramp costs fewer steps but can overshoot the onset (a dynamic buckling lags the
@@ -10,7 +11,9 @@ configs/fig3_paper.yaml (the random sampler draws the same first points for any 
 rate, and once at the scene's rate with the finer reference settings (n = 140, safety 0.25),
 then reports per rate: steps summed over the runs (a measure of work that does not depend on
 the machine or its load), the runs' own times summed, the sweep's wall time, statuses, and label agreement with the
-reference point by point. Stores go to out/ramp/ and are resumed when rerun.
+reference point by point. Stores go to --out (out/ramp/) and are resumed when rerun; `--set`
+applies to every sweep, the reference too (after its own settings: a smoke test makes them
+all coarse).
 
 Since 2026-12-03 the config starts its runs on the straight branch (loading.quasi_static_below
 0.8), so the rate variants ramp from 0.8 of the buckling twist; the reference keeps the whole
@@ -32,10 +35,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, same_points, sweep_table, write_block
+
+from rodphase.studytools import machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "out" / "ramp"
 RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 CONFIG = "fig3_paper"
 REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static_below=0"]
@@ -57,28 +60,33 @@ def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> float:
     return float("nan") if resumed else time.perf_counter() - t0
 
 
-def main() -> int:
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--rates", default="0.5,1,2,4", help="turns/s, comma-separated")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--write", type=Path, action="append", default=[])
-    args = parser.parse_args()
-    OUT.mkdir(parents=True, exist_ok=True)
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "ramp", help="folder of the stores")
+    parser.add_argument("--set", dest="sets", action="append", default=[],
+                        help="KEY=VALUE for every sweep (repeatable)")
+    args = parser.parse_args(argv)
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
     rates = [float(r) for r in args.rates.split(",")]
 
-    ref_path = OUT / f"reference_{args.samples}.h5"
-    walls = {"reference": sweep(ref_path, REFERENCE_SET, args.samples, args.jobs)}
+    ref_path = out / f"reference_{args.samples}.h5"
+    walls = {"reference": sweep(ref_path, REFERENCE_SET + args.sets, args.samples, args.jobs)}
     for rate in rates:
-        path = OUT / f"rate_{rate:g}_{args.samples}.h5"
-        walls[rate] = sweep(path, [f"loading.twist_rate={rate:g}"], args.samples, args.jobs)
+        path = out / f"rate_{rate:g}_{args.samples}.h5"
+        walls[rate] = sweep(path, [f"loading.twist_rate={rate:g}"] + args.sets, args.samples,
+                            args.jobs)
 
     ref = sweep_table(ref_path)
     rows = ["| twist rate [turns/s] | runs | steps [M] | run time [s] | sweep wall [s] | statuses | "
             "labels as the reference | disagreeing points (Φa, L/L0: this → reference) |",
             "|---|---|---|---|---|---|---|---|"]
     for name in ["reference"] + rates:
-        path = ref_path if name == "reference" else OUT / f"rate_{name:g}_{args.samples}.h5"
+        path = ref_path if name == "reference" else out / f"rate_{name:g}_{args.samples}.h5"
         t = sweep_table(path)
         cpu = float(np.nansum(t["wall_time"]))  # each run's own time in its worker
         statuses = ", ".join(f"{k} {v}" for k, v in t["status"].value_counts().sort_index().items())

@@ -7,14 +7,16 @@ The settings are those of GazzolaLab/PyElastica (commit 024194e0959f85a22710acff
 
 re-expressed here (the settings carry over, the code is written anew) for PyElastica 1.0.
 
-    python scripts/crosscheck_pyelastica.py reference solenoid     # ~20-60 min on one core
-    python scripts/crosscheck_pyelastica.py reference plectoneme   # ~1 h on one core
-    python scripts/crosscheck_pyelastica.py rodphase solenoid      # minutes
-    python scripts/crosscheck_pyelastica.py compare solenoid       # table + docs/img/crosscheck_solenoid.png
+    python studies/crosscheck_pyelastica.py reference solenoid     # ~20-60 min on one core
+    python studies/crosscheck_pyelastica.py reference plectoneme   # ~1 h on one core
+    python studies/crosscheck_pyelastica.py rodphase solenoid      # minutes
+    python studies/crosscheck_pyelastica.py compare solenoid       # table + docs/img/crosscheck_solenoid.png
 
 `reference` keeps every 0.05 s frame in /tmp/crosscheck_raw_CASE.npz (MBs) and writes the
 reduced record tests/data/crosscheck_CASE.npz (0.5 s samples, final shape; < 300 kB).
 `reduce CASE` redoes the reduction from the raw file. Run with NUMBA_NUM_THREADS=1.
+`--final-time T` stops `reference` and `rodphase` at T seconds (tests/test_studies_smoke.py
+runs the first moments of each).
 """
 
 from __future__ import annotations
@@ -89,8 +91,9 @@ def settings(case: str) -> dict:
 
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path) -> None:
     import elastica as ea
-    from _common import machine
     from elastica._rotations import _get_rotation_matrix
+
+    from rodphase.studytools import machine
 
     c = settings(case)
     if final_time is not None:
@@ -384,17 +387,33 @@ def build_problem(case: str, sets, twist: str, kick: str, kick_scale: float = 1.
     return problem
 
 
+def stop_at(problem, final_time: float):
+    """The problem with its protocol cut at `final_time` seconds (the stages up to it, the
+    last one shortened): a smoke test runs the first moments of a case."""
+    import dataclasses
+
+    stages, start = [], 0.0
+    for stage in problem.stages:
+        if start >= final_time:
+            break
+        stages.append(dataclasses.replace(stage, duration=min(stage.duration, final_time - start)))
+        start += stage.duration
+    problem.stages = tuple(stages)
+    return problem
+
+
 def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
                  out: Path, bodies: str = "none", kick_scale: float = 1.0,
-                 reference: Path | None = None) -> dict:
-    from _common import machine
-
+                 reference: Path | None = None, final_time: float | None = None) -> dict:
     from rodphase import classify
     from rodphase.runner import run
+    from rodphase.studytools import machine
     from rodphase.topology import topology_history
 
     sets = rodphase_sets(case, contact, dt, rotation_damping, bodies)
     problem = build_problem(case, sets, twist, kick, kick_scale, reference)
+    if final_time is not None:
+        problem = stop_at(problem, final_time)
     cpu0 = time.process_time()
     result = run(problem, topology=True)
     cpu = time.process_time() - cpu0
@@ -550,6 +569,7 @@ def main(argv=None) -> int:
                         "holder cylinders (ends.start_body/end_body), which stop loops slipping off")
     r.add_argument("--reference", type=Path, default=None,
                    help="reduced reference npz for --twist as-run (default tests/data/crosscheck_CASE.npz)")
+    r.add_argument("--final-time", type=float, default=None, help="stop early (s)")
     r.add_argument("-o", "--out", type=Path, default=None)
     q = sub.add_parser("compare", help="table and figure: reference vs rodphase")
     q.add_argument("case", choices=sorted(CASES))
@@ -559,7 +579,8 @@ def main(argv=None) -> int:
     if args.cmd == "rodphase":
         out = args.out or Path(f"/tmp/crosscheck_rodphase_{args.case}.npz")
         run_rodphase(args.case, args.contact, args.dt, args.twist, args.kick,
-                     args.rotational_damping, out, args.end_bodies, args.kick_scale, args.reference)
+                     args.rotational_damping, out, args.end_bodies, args.kick_scale, args.reference,
+                     args.final_time)
         return 0
     if args.cmd == "compare":
         compare(args.case, DATA / f"crosscheck_{args.case}.npz",

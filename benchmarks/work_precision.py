@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Work-precision: error against CPU time over the number of elements n and the time step.
 
-    python scripts/work_precision.py [--only stretch,cantilever,greenhill,writhe] [--quick]
+    python benchmarks/work_precision.py [--only stretch,cantilever,greenhill,writhe] [--quick]
                                      [--write docs/performance.md]
 
 Reference problems (the setups of tests/test_rod.py):
@@ -41,7 +41,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
 
 from rodphase.rod import (
     Controls,
@@ -55,6 +54,7 @@ from rodphase.rod import (
     simulate,
     straight_state,
 )
+from rodphase.studytools import machine, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 from rodphase.theory import greenhill_clamped_moment

@@ -1,5 +1,10 @@
-"""What the study scripts share: the machine they ran on, updating a Markdown block, and
-reading sweep stores point by point."""
+"""What the scripts of benchmarks/ and studies/ share: the machine a number was measured on,
+the named Markdown block of docs/ a script rewrites, and sweep stores read point by point.
+
+Nothing in the package calls these; they live here, not in a scripts module, so that every
+script imports them the same way (``from rodphase.studytools import write_block``) wherever
+it is run from, and so that they are tested (tests/test_studytools.py).
+"""
 
 from __future__ import annotations
 
@@ -8,9 +13,13 @@ from pathlib import Path
 
 
 def machine() -> dict:
-    """CPU model, core count and load average, to print next to every timing."""
+    """CPU model, core count and load average (1, 5, 15 min), to print next to every timing."""
     cpu = "unknown"
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:  # not Linux
+        lines = []
+    for line in lines:
         if line.startswith("model name"):
             cpu = line.split(":", 1)[1].strip()
             break
@@ -18,7 +27,9 @@ def machine() -> dict:
 
 
 def write_block(doc: Path, name: str, text: str) -> None:
-    """Replace the text between <!-- name:begin --> and <!-- name:end --> in `doc`."""
+    """Replace the text between ``<!-- name:begin -->`` and ``<!-- name:end -->`` in `doc`
+    (appended at the end, with both markers, when the file has no such block)."""
+    doc = Path(doc)
     begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
     body = doc.read_text() if doc.exists() else ""
     if begin in body and end in body:
@@ -35,9 +46,9 @@ def sweep_table(path: Path):
     """The classified table of a sweep store, in run order. Sweeps of one config with the same
     sampler and seed draw the same points in the same order, so the i-th rows of two such
     tables are the same point (check it with same_points)."""
-    import rodphase
+    from .api import table
 
-    return rodphase.table(path).sort_values("run_id").reset_index(drop=True)
+    return table(path).sort_values("run_id").reset_index(drop=True)
 
 
 def same_points(a, b, axes=("twist_density", "extension")) -> bool:

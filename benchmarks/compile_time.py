@@ -1,8 +1,8 @@
 """First-compile cost: `make demo` and `rodphase run` on an empty numba cache, and where it goes.
 
-    python scripts/compile_time.py demo --repeats 2      # the steps of `make demo`, cold cache
-    python scripts/compile_time.py run --repeats 2       # `rodphase run twist_under_load`, cold
-    python scripts/compile_time.py functions             # seconds per compiled function
+    python benchmarks/compile_time.py demo --repeats 2      # the steps of `make demo`, cold cache
+    python benchmarks/compile_time.py run --repeats 2       # `rodphase run twist_under_load`, cold
+    python benchmarks/compile_time.py functions             # seconds per compiled function
 
 Every repeat gets a new, empty NUMBA_CACHE_DIR (removed afterwards), so nothing is loaded
 from an earlier compile: neither from a cache dir nor from the __pycache__ next to the
@@ -33,8 +33,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "scripts"))
-from _common import machine  # noqa: E402
 
 
 def _env(cache: str) -> dict:
@@ -173,12 +171,17 @@ def main(argv=None) -> int:
     if args.repo:
         global ROOT
         ROOT = Path(args.repo).resolve()
-    if args.what == "functions" and ("NUMBA_CACHE_DIR" not in os.environ
-                                     or "rodphase" in sys.modules):
-        functions()  # runs itself again on an empty cache, and exits
-    m = machine()
-    print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}; rodphase from "
-          f"{ROOT}", flush=True)
+    # `functions` runs itself again in a process that must not import rodphase before it
+    # times the compile (that child has NUMBA_CACHE_DIR set and says nothing here): the
+    # machine line is this process's
+    timed_child = (args.what == "functions" and "NUMBA_CACHE_DIR" in os.environ
+                   and "rodphase" not in sys.modules)
+    if not timed_child:
+        from rodphase.studytools import machine
+
+        m = machine()
+        print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}; rodphase from "
+              f"{ROOT}", flush=True)
     if args.what == "demo":
         demo(args.repeats, args.jobs, args.keep)
     elif args.what == "run":

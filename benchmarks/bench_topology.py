@@ -1,6 +1,6 @@
 """Time link, twist and writhe per frame against PyElastica's knot_theory; print Markdown.
 
-    python scripts/bench_topology.py [--repeats 30] [--sizes 50 100 150 200 400]
+    python benchmarks/bench_topology.py [--repeats 30] [--sizes 50 100 150 200 400]
 
 Timings are medians after a warm-up call (compilation excluded), with the minimum in
 brackets: on a shared machine the median shows the typical cost, the minimum the cost

@@ -1,6 +1,6 @@
 """Critical twist density against extension from a classified sweep (paper Fig 3).
 
-    python scripts/critical_twist.py TABLE.csv [--column phi_a_rest] [--above 1.1]
+    python studies/critical_twist.py TABLE.csv [--column phi_a_rest] [--above 1.1]
 
 Bins the runs by extension L/L0; in each bin the critical Φa is the midpoint between the
 largest Φa still straight and the smallest Φa that buckled (any non-straight phase). A
@@ -30,14 +30,14 @@ def critical_points(table: pd.DataFrame, column: str, bins: int):
     return pd.DataFrame(rows, columns=["extension", "critical", "half_gap"])
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("table")
     parser.add_argument("--column", default="phi_a_rest",
                         help="phi_a_rest (the paper's Φa = θ·a0/L0) or phi_a_current")
     parser.add_argument("--above", type=float, default=1.1)
     parser.add_argument("--bins", type=int, default=10)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     points = critical_points(pd.read_csv(args.table), args.column, args.bins)
     print("| L/L0 | critical Φa | ± |")
     print("|---|---|---|")

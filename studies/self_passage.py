@@ -1,12 +1,12 @@
 #!/usr/bin/env python
 """Where did a run's link go? Each link jump of a twist_under_load point, located.
 
-    python scripts/self_passage.py --twist-density 2.556 --extension 1.265 [--elements 80]
+    python studies/self_passage.py --twist-density 2.556 --extension 1.265 [--elements 80]
         [--interval 1e-3] [--set KEY=VALUE ...]
 
 The runner books every change of Lk that the clamps did not put in as an escape (a strand
 passing around an end). A strand can also pass through the rod itself where contact does not
-act. This runs the point (configs/scenes/twist_under_load.yaml with the Fig 3 settings) once
+act. This runs the point (the shipped scene twist_under_load with the Fig 3 settings) once
 at the usual history interval to find the jumps, then again with a history row every
 --interval seconds up to just after the last of them, and for each jump compares the
 Gauss writhe of every pair of the rod's own segments (Klenin & Langowski's solid angle) in
@@ -57,7 +57,7 @@ def pair_writhe(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return i, j, 2.0 * omega * sign / (4.0 * math.pi)
 
 
-def main() -> int:
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--twist-density", type=float, required=True, help="Phi*a (rest)")
     parser.add_argument("--extension", type=float, required=True, help="L/L0")
@@ -65,13 +65,13 @@ def main() -> int:
     parser.add_argument("--interval", type=float, default=1e-3, help="s between fine rows")
     parser.add_argument("--set", dest="sets", action="append", default=[],
                         help="KEY=VALUE, e.g. loading.quasi_static_below=0")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     overrides = [("rod.elements", args.elements), ("loading.force_multiple", None),
                  ("loading.twist_density", args.twist_density),
                  ("loading.extension", args.extension), ("loading.quasi_static_below", 0.8),
                  ("output.snapshots", "all")]
     overrides += [C.parse_override(item) for item in args.sets]
-    cfg = C.load_scene("configs/scenes/twist_under_load.yaml", overrides, SCENES)
+    cfg = C.load_scene("twist_under_load", overrides, SCENES)
     coarse = runner.run(build(cfg), topology=True)
     jumps = np.flatnonzero(runner.link_escapes(coarse.history))
     print(f"{coarse.status}: {len(jumps)} link jump(s) at t = "
@@ -79,7 +79,7 @@ def main() -> int:
     if not len(jumps):
         return 0
     last = coarse.history["time"][jumps[-1]] + 0.01
-    fine_cfg = C.load_scene("configs/scenes/twist_under_load.yaml",
+    fine_cfg = C.load_scene("twist_under_load",
                             overrides + [("output.history_interval", args.interval)], SCENES)
     problem = build(fine_cfg)
     dt, _ = time_step(problem)

@@ -2,8 +2,8 @@
 
 Run from the checkout (after `make install`):
 
-    .venv/bin/python scripts/bench_overhead.py                  # 2,000 runs, --jobs 2
-    .venv/bin/python scripts/bench_overhead.py --runs 300 --jobs 2 --keep out/bench.h5
+    .venv/bin/python benchmarks/bench_overhead.py                  # 2,000 runs, --jobs 2
+    .venv/bin/python benchmarks/bench_overhead.py --runs 300 --jobs 2 --keep out/bench.h5
 
 Two parts, both on tiny, short runs (20 elements, a small twist, a 0.2 s hold: a few
 milliseconds of simulation each, as the continuation solver will make them):

@@ -1,8 +1,9 @@
 #!/usr/bin/env python
 """Fig 3 with and without the quasi-static straight start: cost, and how much the results move.
 
-    python scripts/straight_start.py [--samples 200] [--rounds 2] [--variants 0,0.8]
+    python studies/straight_start.py [--samples 200] [--rounds 2] [--variants 0,0.8]
         [--set KEY=VALUE ...] [--reference out/perf/fig3_ref.h5] [--write docs/performance.md]
+        [--out out/straight]
 
 Each variant is `rodphase sweep configs/fig3_paper.yaml --set loading.quasi_static_below=S`
 (S = 0 is the paper's protocol step by step: load ramp, twist ramp from rest, hold). The
@@ -11,8 +12,8 @@ machine's changing load falls on all of them alike; every sweep writes a fresh s
 variant: steps summed over the runs (the load-free measure of work), sweep wall time (each
 round), statuses, and, point by point against S = 0, the labels and the largest differences
 of writhe, link and final extension; against the fine reference sweep (n = 140, safety 0.25,
-whole protocol: `scripts/phase_timing.py reference`), the labels of the points it has.
-Stores go to out/straight/.
+whole protocol: `benchmarks/phase_timing.py reference`), the labels of the points it has.
+Stores go to --out (out/straight/).
 """
 
 from __future__ import annotations
@@ -30,10 +31,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, same_points, sweep_table, write_block
+
+from rodphase.studytools import machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "out" / "straight"
 RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 CONFIG = "fig3_paper"
 
@@ -58,7 +59,7 @@ def fresh_sweep(path: Path, sets: list[str], jobs: int) -> float:
     return wall
 
 
-def main() -> int:
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=2)
@@ -69,8 +70,11 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--reference", type=Path, default=ROOT / "out" / "perf" / "fig3_ref.h5")
     parser.add_argument("--write", type=Path, action="append", default=[])
-    args = parser.parse_args()
-    OUT.mkdir(parents=True, exist_ok=True)
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "straight",
+                        help="folder of the stores")
+    args = parser.parse_args(argv)
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
     variants = [float(v) for v in args.variants.split(",")]
     common = [f"sweep.samples={args.samples}"] + args.sets
     subprocess.run([sys.executable, "-c", "from rodphase.runner import compile_kernel; "
@@ -81,9 +85,9 @@ def main() -> int:
     for _ in range(args.rounds):
         for v in variants:
             sets = common + [f"loading.quasi_static_below={v:g}"]
-            walls[v].append(fresh_sweep(OUT / f"fig3_{v:g}.h5", sets, args.jobs))
+            walls[v].append(fresh_sweep(out / f"fig3_{v:g}.h5", sets, args.jobs))
 
-    base = sweep_table(OUT / f"fig3_{variants[0]:g}.h5")
+    base = sweep_table(out / f"fig3_{variants[0]:g}.h5")
     ref = sweep_table(args.reference) if args.reference.exists() else None
     if ref is not None and not same_points(base, ref):
         raise SystemExit(f"{args.reference}: its points are not this sweep's")
@@ -91,7 +95,7 @@ def main() -> int:
             f"S = {variants[0]:g} | max \\|ΔWr\\| [turns] | max \\|ΔLk\\| [turns] | max \\|Δ L/L0\\| | "
             "labels as the n = 140 reference |", "|---|---|---|---|---|---|---|---|---|---|"]
     for v in variants:
-        t = sweep_table(OUT / f"fig3_{v:g}.h5")
+        t = sweep_table(out / f"fig3_{v:g}.h5")
         if not same_points(t, base):
             raise SystemExit(f"variant {v}: its points are not the first variant's")
         statuses = ", ".join(f"{k} {c}" for k, c in t["status"].value_counts().sort_index().items())

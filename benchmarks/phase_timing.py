@@ -3,10 +3,10 @@
 labels against a finer reference sweep, and the saving of each "model no more than a scene
 needs" switch.
 
-    python scripts/phase_timing.py savings            # per-scene savings (one process)
-    python scripts/phase_timing.py reference [--samples 40]   # fine sweep, --jobs 2
-    python scripts/phase_timing.py timing             # configs/fig3_paper.yaml, --jobs 2
-    python scripts/phase_timing.py compare [--write docs/performance.md]
+    python benchmarks/phase_timing.py savings            # per-scene savings (one process)
+    python benchmarks/phase_timing.py reference [--samples 40]   # fine sweep, --jobs 2
+    python benchmarks/phase_timing.py timing             # configs/fig3_paper.yaml, --jobs 2
+    python benchmarks/phase_timing.py compare [--write docs/performance.md]
 
 `--config configs/fig3_phase.yaml` times the DESIGN's rest-Φa box instead of the paper's
 axes (give it to reference, timing and compare alike).
@@ -37,7 +37,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import machine, write_block
+from rodphase.studytools import machine, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "perf"
@@ -358,7 +358,6 @@ def main():
     if args.config is not None:
         global CONFIG
         CONFIG = args.config.resolve()
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     if args.step == "savings":
         if not args.resume:  # --resume: retabulate the stored measurements
             _save("savings", savings())

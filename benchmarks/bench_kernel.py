@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Kernel benchmark: µs per time step of rodphase against PyElastica 1.0, same scene, same dt.
 
-    python scripts/bench_kernel.py [--write docs/benchmarks.md] [--quick]
+    python benchmarks/bench_kernel.py [--write docs/benchmarks.md] [--quick]
 
 The scene (DESIGN.md §7) is the paper's rod, L0 = 1 m, a = 0.025 m, E = 1 MPa, G = 2E/3
 (= E/(1+ν) with ν = ½, as PyElastica's examples write it), ρ = 1000 kg/m³, clamped at node 0;
@@ -539,7 +539,7 @@ def _f(v, digits=1):
 
 def report(machine, source_info, rows, extra, args, total) -> str:
     lines = [SECTION, ""]
-    lines.append(f"Measured {machine['date']} by `python scripts/bench_kernel.py"
+    lines.append(f"Measured {machine['date']} by `python benchmarks/bench_kernel.py"
                  f"{' --quick' if args.quick else ''}` in {total:.0f} s: {machine['cpu']}, "
                  f"{machine['nproc']} CPUs, one thread (NUMBA_NUM_THREADS=1); Python "
                  f"{machine['python']}, numpy {machine['numpy']}, numba {machine['numba']}, "

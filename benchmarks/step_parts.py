@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Where a Fig 3 step goes, and what a Newton iteration on the same rod would cost.
 
-    python scripts/step_parts.py [--point 2.447,1.056] [--elements 80] [--write docs/performance.md]
+    python benchmarks/step_parts.py [--point 2.447,1.056] [--elements 80] [--write docs/performance.md]
 
 Issue #16 asks for Fig 3 in 20 s. Most of its CPU is the twist ramp of the runs that buckle
 into plectonemes, at 80 elements with self-contact. This script takes one such run (by
@@ -42,7 +42,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine, write_block
 from numba import njit
 
 import rodphase
@@ -51,6 +50,7 @@ from rodphase.rod import contact as K
 from rodphase.rod.simulate import _rod_arrays
 from rodphase.runner import run_scene
 from rodphase.scenes import build
+from rodphase.studytools import machine, write_block
 
 REPEATS = 7
 

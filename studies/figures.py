@@ -1,4 +1,4 @@
-"""Run the paper's scenes and draw their figures: `python scripts/figures.py --out DIR`.
+"""Run the paper's scenes and draw their figures: `python studies/figures.py --out DIR`.
 
 Each figure is one or two shipped scenes (rodphase/configs/scenes/). Its runs go to
 DIR/<fig>.h5 (one group per run, readable with `rodphase plot`), its pictures to
@@ -541,7 +541,7 @@ DRAW = {"fig2a": lambda res, out, sets: figure2("fig2a", res, out, sets),
         "figS3": figureS3}
 
 
-def main() -> int:
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out", help="output folder")
     parser.add_argument("--only", default="", help="comma-separated figures: " + ", ".join(FIGURES))
@@ -550,7 +550,7 @@ def main() -> int:
     parser.add_argument("--set", dest="sets", action="append", default=[],
                         help="key=value applied to every scene")
     parser.add_argument("--replot", action="store_true", help="redraw from DIR/<fig>.h5, no simulation")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     chosen = [f for f in args.only.split(",") if f] or list(FIGURES)

@@ -2,9 +2,9 @@
 
 A refactor of the kernel that changes no physics must leave these bit-identical:
 
-    python scripts/reference_positions.py /tmp/ref_before.npz      # on the old code
-    python scripts/reference_positions.py /tmp/ref_after.npz       # on the new code
-    python scripts/reference_positions.py --compare /tmp/ref_before.npz /tmp/ref_after.npz
+    python benchmarks/reference_positions.py /tmp/ref_before.npz      # on the old code
+    python benchmarks/reference_positions.py /tmp/ref_after.npz       # on the new code
+    python benchmarks/reference_positions.py --compare /tmp/ref_before.npz /tmp/ref_after.npz
 
 The comparison is np.array_equal (exact), per array; it exits 1 if any differs.
 Each run is short (a few seconds once numba's cache is warm); the set covers contact

@@ -1,6 +1,6 @@
 """Hat curves from a store (scene hat_curve, or the sweep configs/hat_forces.yaml).
 
-    python scripts/hat_curve.py OUT.h5 [--plot DIR]
+    python studies/hat_curve.py OUT.h5 [--plot DIR]
 
 Per run: the force; the buckling torque on the way up (the peak |end torque| before the
 writhe first exceeds 0.2 turns) against the
@@ -62,11 +62,11 @@ def measure(result) -> dict:
     }
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("store")
     parser.add_argument("--plot", type=Path, help="folder for one hat-curve figure per run")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     rows = []
     with read_store(args.store) as store:
         for rid in store.run_ids():

@@ -1,16 +1,17 @@
 """Holds that settle (issue #13): the shipped defaults against the implicit damping settings.
 
-    python scripts/damping_sweeps.py speed   [--steps 4000 --rounds 5]
-    python scripts/damping_sweeps.py demo    [--out DIR]
-    python scripts/damping_sweeps.py figures [--out DIR] [--only figS9,fig4a]
-    python scripts/damping_sweeps.py fig3    [--out DIR] [--samples 40]
+    python studies/damping_sweeps.py speed   [--steps 4000 --rounds 5]
+    python studies/damping_sweeps.py demo    [--out DIR]
+    python studies/damping_sweeps.py figures [--out DIR] [--only figS9,fig4a]
+    python studies/damping_sweeps.py fig3    [--out DIR] [--samples 40]
 
 Each command runs the same work with every variant of VARIANTS (the `--set` overrides that
-turn the new terms on) and prints one line per variant; `--variants` picks some.
+turn the new terms on) and prints one line per variant; `--variants` picks some. `--set
+KEY=VALUE` changes every scene or sweep of every variant alike (a smoke test makes them coarse).
 `speed` is the kernel's CPU time per step on a solenoid in contact, variants interleaved in
 one process round by round (min and median of the rounds), so that a change of load on a
 shared machine hits them alike. `demo` counts the statuses of configs/quick.yaml's 24 runs.
-`figures` runs scripts/figures.py for each variant into DIR/<variant>/ and reads back the
+`figures` runs studies/figures.py for each variant into DIR/<variant>/ and reads back the
 numbers docs/reproduction.md quotes (every run's status, Fig S9's last hold, Fig 4a's force
 noise, Fig 2b's writhe per solenoid turn). `fig3` times the first --samples points of
 configs/fig3_paper.yaml per variant, interleaved in chunks, and counts their phases.
@@ -54,7 +55,7 @@ def machine() -> str:
     return f"{model}, {os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}"
 
 
-def speed(variants, steps: int, rounds: int) -> None:
+def speed(variants, steps: int, rounds: int, extra=()) -> None:
     """µs/step (CPU time) of the kernel on the Fig 2b solenoid's hold, interleaved."""
     from rodphase import config as C
     from rodphase.rod import simulate
@@ -64,7 +65,7 @@ def speed(variants, steps: int, rounds: int) -> None:
 
     # a solenoid in contact to start from: the coarse Fig 2b scene run to the end of its twist
     base = [("rod.elements", 100), ("loading.twist_density", 1.55), ("loading.twist_rate", 1.0),
-            ("solver.hold_max_time", 0.5)]
+            ("solver.hold_max_time", 0.5), *extra]
     cfg = C.load_scene("fig2b_solenoid", base, SCENES)
     start = simulate(build_problem(cfg))
     print(f"start state: {start.status}, {int(start.history['contacts'][-1])} touching pairs",
@@ -100,14 +101,15 @@ def simulate_dt(problem) -> float:
     return time_step(problem)[0]
 
 
-def demo(variants, out: Path) -> None:
+def demo(variants, out: Path, extra=()) -> None:
     from rodphase import config as C
     from rodphase.scenes import SCENES
     from rodphase.sweep import run_sweep
 
     out.mkdir(parents=True, exist_ok=True)
     for name in variants:
-        sweep, scene = C.load_sweep(ROOT / "configs/quick.yaml", VARIANTS[name], SCENES)
+        sweep, scene = C.load_sweep(ROOT / "configs/quick.yaml", [*extra, *VARIANTS[name]],
+                                    SCENES)
         path = out / f"quick_{name}.h5"
         if path.exists():
             path.unlink()
@@ -125,12 +127,14 @@ def _statuses(path) -> list[str]:
         return [store.read_run(rid).status for rid in store.run_ids()]
 
 
-def figures(variants, out: Path, only: str) -> None:
+def figures(variants, out: Path, only: str, extra=()) -> None:
     for name in variants:
         folder = out / name
-        cmd = [sys.executable, str(ROOT / "scripts/figures.py"), "--out", str(folder), "--jobs", "1"]
+        cmd = [sys.executable, str(ROOT / "studies/figures.py"), "--out", str(folder), "--jobs", "1"]
         if only:
             cmd += ["--only", only]
+        for item in extra:  # as given: figures.py parses them
+            cmd += ["--set", item]
         for key, value in VARIANTS[name]:
             cmd += ["--set", f"{key}={value}"]
         start = time.perf_counter()
@@ -168,7 +172,7 @@ def _stage_residuals(folder: Path) -> None:
                 print(f"    {path.stem}/{rid}: {text}")
 
 
-def fig3(variants, out: Path, samples: int, chunk: int, resume: bool) -> None:
+def fig3(variants, out: Path, samples: int, chunk: int, resume: bool, extra=()) -> None:
     from rodphase import config as C
     from rodphase.scenes import SCENES
     from rodphase.store import read_store
@@ -187,7 +191,8 @@ def fig3(variants, out: Path, samples: int, chunk: int, resume: bool) -> None:
     for upto in range(chunk, samples + chunk, chunk):
         for name in variants:
             sweep, scene = C.load_sweep(ROOT / "configs/fig3_paper.yaml",
-                                        VARIANTS[name] + [("sweep.samples", min(upto, samples))],
+                                        [*extra, *VARIANTS[name],
+                                         ("sweep.samples", min(upto, samples))],
                                         SCENES)
             report = run_sweep(sweep, scene, str(paths[name]), jobs=1, progress=False,
                                echo=lambda s: None, replace=True)
@@ -213,7 +218,7 @@ def fig3(variants, out: Path, samples: int, chunk: int, resume: bool) -> None:
               + ", ".join(differ), flush=True)
 
 
-def main() -> int:
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("what", choices=("speed", "demo", "figures", "fig3"))
     parser.add_argument("--variants", default="default,both")
@@ -224,21 +229,29 @@ def main() -> int:
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--chunk", type=int, default=10)
     parser.add_argument("--resume", action="store_true", help="fig3: keep the stores, add runs")
-    args = parser.parse_args()
+    parser.add_argument("--set", dest="sets", action="append", default=[],
+                        help="KEY=VALUE for every scene or sweep (repeatable)")
+    args = parser.parse_args(argv)
     variants = args.variants.split(",")
     unknown = set(variants) - set(VARIANTS)
     if unknown:
         parser.error(f"unknown variants {sorted(unknown)}; choose from {', '.join(VARIANTS)}")
+    from rodphase import config as C
+
+    try:
+        extra = [C.parse_override(s) for s in args.sets]
+    except C.ConfigError as exc:
+        parser.error(str(exc))
     print(machine(), flush=True)
     out = Path(args.out)
     if args.what == "speed":
-        speed(variants, args.steps, args.rounds)
+        speed(variants, args.steps, args.rounds, extra)
     elif args.what == "demo":
-        demo(variants, out)
+        demo(variants, out, extra)
     elif args.what == "figures":
-        figures(variants, out, args.only)
+        figures(variants, out, args.only, args.sets)
     else:
-        fig3(variants, out, args.samples, args.chunk, args.resume)
+        fig3(variants, out, args.samples, args.chunk, args.resume, extra)
     return 0
 
 

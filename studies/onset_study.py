@@ -5,8 +5,8 @@ textbook E/3 of an incompressible solid). The model's own onset (rod/onset.py: t
 discrete rod at n elements, from its stiffness) answers both for the phase map's lowest
 boundary, the straight rod's loss of stability, without a sweep:
 
-    python scripts/onset_study.py                     # table to stdout, n = 80
-    python scripts/onset_study.py --write             # also docs/img/onset_study.png and the
+    python studies/onset_study.py                     # table to stdout, n = 80
+    python studies/onset_study.py --write             # also docs/img/onset_study.png and the
                                                       # table block of docs/reproduction.md
     make onset-study                                  # the same as --write
 
@@ -70,7 +70,7 @@ def table(extensions, lines: dict[str, np.ndarray], n: int) -> str:
                                          f" ({lines[k][i] / base[i]:.3f}×)") for k in names]
         rows.append(f"| {e:.2f} | " + " | ".join(cells) + " |")
     return (head + "\n".join(rows) + f"\n\nΦa = θ·a0/L0 at the onset, n = {n}; in brackets the "
-            "ratio to the paper's rod. `scripts/onset_study.py --write`.\n")
+            "ratio to the paper's rod. `studies/onset_study.py --write`.\n")
 
 
 def figure(extensions, lines, path: Path, n: int) -> None:

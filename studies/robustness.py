@@ -12,9 +12,9 @@ Stores are always inspected in a child process (`--inspect PATH`, JSON on stdout
 damaged HDF5 file can crash the reader, and that crash is then a finding, not the end of
 the harness.
 
-    python scripts/robustness.py                       # every case, 60 kill points
-    python scripts/robustness.py --kills 60 --write docs/robustness.md
-    python scripts/robustness.py --cases kill-9-during-write memory-300-runs
+    python studies/robustness.py                       # every case, 60 kill points
+    python studies/robustness.py --kills 60 --write docs/robustness.md
+    python studies/robustness.py --cases kill-9-during-write memory-300-runs
 
 tests/test_robustness.py imports this file (importlib, by path) and runs each case as one
 parametrized row with fewer kill points. Needs Linux (/proc), strace for the kill case and
@@ -1406,15 +1406,14 @@ def main(argv=None) -> int:
             print(row.report(), flush=True)
             rows.append(row)
     total = time.monotonic() - started
-    header = (f"Robustness of the store (scripts/robustness.py, {args.kills} kill points, "
+    header = (f"Robustness of the store (studies/robustness.py, {args.kills} kill points, "
               f"seed {args.seed}, {time.strftime('%Y-%m-%d', time.gmtime())}, "
               f"{os.cpu_count()} cores, {total:.0f} s):")
     text = markdown(rows, header)
     print()
     print(text)
     if args.write:
-        sys.path.insert(0, str(SCRIPT.parent))
-        from _common import write_block
+        from rodphase.studytools import write_block
 
         write_block(args.write, "robustness", text)
     if args.workdir is None:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """CPU µs per step of the two incompressible laws (material.law), interleaved in one process.
 
-    python scripts/bench_laws.py [--rounds 7] [--steps 20000] [--elements 150]
+    python benchmarks/bench_laws.py [--rounds 7] [--steps 20000] [--elements 150]
 
 Each round times `simulate` once per law and case, alternating, with the process's CPU time
 (time.process_time), so that a machine shared with other work slows both laws alike. Cases as

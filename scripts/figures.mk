@@ -1,9 +1,0 @@
-# Per-figure targets for the paper's figures (scripts/figures.py). Include from the Makefile:
-#     include scripts/figures.mk
-# then e.g. `make fig4a` writes $(OUT)/fig4a.h5, fig4a.png, fig4a_shape.png, fig4a.json.
-FIGURE_NAMES = fig2a fig2b fig4a fig4b fig4c figS9 figS3
-
-.PHONY: $(FIGURE_NAMES)
-fig2a fig2b fig4a fig4b fig4c figS9 figS3: $(STAMP)  ## one figure of the paper each (scripts/figures.py --only)
-	@mkdir -p $(OUT)
-	$(BIN)/python scripts/figures.py --out $(OUT) --only $@ --jobs $(JOBS)

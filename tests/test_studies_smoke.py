@@ -1,0 +1,287 @@
+"""Every study of studies/ run small (issue #27: a script nothing runs or tests rots).
+
+Each test runs one study as its make target does, but coarse and short (a few dozen elements,
+one or two points, fractions of a second of hold), and checks that it wrote what it writes
+(its files, its Markdown block, its table) with sane content. The physics is not checked
+here: the studies measure it at full size, the other tests check it. A study that pins
+thread counts in the environment when imported, or drives `rodphase` commands, runs in its
+own process; the others are imported by path and called, which shares numba's loaded
+kernels. All of them together took 41-47 s on a shared 2-core AMD EPYC with numba's cache
+warm, 60 % of it in ramp_rate and straight_start: each of their sweeps is a `rodphase sweep`
+process with a worker process of its own, and each process imports numpy, scipy and numba.
+
+Run small elsewhere: studies/onset_study.py by tests/test_onset.py
+(test_the_onset_study_runs_small_and_writes_its_block), studies/robustness.py by
+tests/test_robustness.py (its cases, one parametrized row each).
+"""
+
+import importlib.util
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDIES = ROOT / "studies"
+BENCHMARKS = ROOT / "benchmarks"
+# studies run small by other test modules (module: what names the study there)
+ELSEWHERE = {"onset_study": "test_onset.py", "robustness": "test_robustness.py"}
+
+
+def study(name: str):
+    """studies/<name>.py imported by path (studies/ is not a package)."""
+    spec = importlib.util.spec_from_file_location(f"rodphase_study_{name}", STUDIES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up by name
+    spec.loader.exec_module(module)
+    return module
+
+
+def script(name: str, *args, cwd: Path) -> subprocess.CompletedProcess:
+    """studies/<name>.py in its own process, with this checkout's rodphase first on the path."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in env.get("PYTHONPATH", "")
+                                                       .split(os.pathsep) if p])
+    done = subprocess.run([sys.executable, str(STUDIES / f"{name}.py"), *map(str, args)],
+                          cwd=cwd, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    return done
+
+
+def block(doc: Path, name: str) -> str:
+    """The text of the named Markdown block a study wrote into `doc`."""
+    text = doc.read_text()
+    assert text.count(f"<!-- {name}:begin -->") == 1, text
+    return text.split(f"<!-- {name}:begin -->\n", 1)[1].split(f"\n<!-- {name}:end -->", 1)[0]
+
+
+@pytest.fixture
+def doc(tmp_path):
+    """A Markdown file with text around the blocks the studies write."""
+    path = tmp_path / "doc.md"
+    path.write_text("before\n")
+    return path
+
+
+@pytest.fixture
+def restore_numba_threads():
+    """Studies that run scenes in this process set numba's thread count to one."""
+    import numba
+
+    threads = numba.get_num_threads()
+    yield
+    numba.set_num_threads(threads)
+
+
+# ------------------------------------------------------------------ tables in, tables out
+
+def test_critical_twist_fits_the_line_of_a_known_boundary(tmp_path, capsys):
+    # make fig3 / make phase: critical Φa per extension bin of a classified sweep, fitted
+    # points at the ten bins' centres (within a bin a sloped line would blur the bracket),
+    # random Φa, and one straight point at each end of the extension range (the bin edges)
+    rng = np.random.default_rng(0)
+    ext = np.r_[1.0, 1.3, rng.choice(1.015 + 0.03 * np.arange(10), 2000)]
+    phi = np.r_[0.0, 0.0, rng.uniform(0.0, 2.6, 2000)]
+    critical = 2.0 * ext - 1.0
+    table = pd.DataFrame({"extension": ext, "phi_a_rest": phi,
+                          "phase": np.where(phi < critical, "straight", "plectoneme")})
+    table.to_csv(tmp_path / "fig3.csv", index=False)
+    study("critical_twist").main([str(tmp_path / "fig3.csv"), "--above", "1.1"])
+    out = capsys.readouterr().out
+    assert len(re.findall(r"^\| 1\.\d{3} \| [\d.]+ \| [\d.]+ \|$", out, re.M)) == 10
+    slope, intercept, r2 = map(float, re.search(
+        r"Φa_c = ([\d.-]+)·\(L/L0\) \+ ([\d.-]+), R² = ([\d.]+)", out).groups())
+    assert slope == pytest.approx(2.0, abs=0.1) and intercept == pytest.approx(-1.0, abs=0.1)
+    assert r2 > 0.99
+
+
+def test_boundary_error_scores_random_and_adaptive_samples(tmp_path, capsys):
+    # make boundary-error: the share of a reference grid the nearest samples label wrongly
+    def table(twist, ext):
+        phase = np.where(twist < 2.0 * ext - 1.0, "straight", "plectoneme")
+        return pd.DataFrame({"run_id": [f"run-{i:05d}" for i in range(len(twist))],
+                             "twist_density": twist, "extension": ext, "status": "ok",
+                             "phase": phase})
+
+    grid = np.meshgrid(np.linspace(0, 2.6, 24), np.linspace(1.0, 1.3, 24))
+    rng = np.random.default_rng(1)
+    paths = [tmp_path / f"{name}.csv" for name in ("reference", "random", "adaptive")]
+    table(grid[0].ravel(), grid[1].ravel()).to_csv(paths[0], index=False)
+    table(rng.uniform(0, 2.6, 40), rng.uniform(1.0, 1.3, 40)).to_csv(paths[1], index=False)
+    table(rng.uniform(0, 2.6, 30), rng.uniform(1.0, 1.3, 30)).to_csv(paths[2], index=False)
+    study("boundary_error").main(*map(str, paths))
+    rows = re.findall(r"^\| (\d+) \| ([\d.]*) \| ([\d.]*) \|$", capsys.readouterr().out, re.M)
+    assert [int(k) for k, _, _ in rows] == [10, 20, 30, 40]
+    errors = [float(e) for _, a, b in rows for e in (a, b) if e]
+    assert len(errors) == 7 and all(0.0 <= e < 0.3 for e in errors)
+
+
+# ------------------------------------------------------------------ runs in this process
+
+def test_hat_curve_measures_a_coarse_hat_curve_run(tmp_path, capsys):
+    # make hat-curve: `rodphase run hat_curve`, then the study on its store
+    rodphase = str(Path(sys.executable).with_name("rodphase"))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    subprocess.run([rodphase, "run", "hat_curve", "-o", str(tmp_path / "hat.h5"),
+                    "--set", "rod.elements=24", "--set", "loading.twist_rate=2"],
+                   check=True, capture_output=True, env=env)
+    study("hat_curve").main([str(tmp_path / "hat.h5"), "--plot", str(tmp_path / "plots")])
+    row = re.search(r"^\| run \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \|", capsys.readouterr().out,
+                    re.M)
+    force, extension, torque = map(float, row.groups())
+    assert force == pytest.approx(25.0) and 1.0 < extension < 1.1 and torque > 0
+    assert (tmp_path / "plots" / "hat_run.png").stat().st_size > 10_000
+
+
+def test_figures_runs_one_figure_small_and_redraws_it(tmp_path, restore_numba_threads):
+    # make figS3 (and make figures, fig2a, ...): the scene's store, its pictures, its numbers
+    figures = study("figures")
+    small = ["--out", str(tmp_path), "--only", "figS3", "--set", "rod.elements=24",
+             "--set", "solver.hold_max_time=0.5"]
+    assert figures.main(small) == 0
+    for name in ("figS3.h5", "figS3.png", "figS3_shape.png"):
+        assert (tmp_path / name).stat().st_size > 1000, name
+    numbers = json.loads((tmp_path / "figS3.json").read_text())
+    assert numbers["figure"] == "figS3" and numbers["turns_put_in"] > 5
+    assert numbers["escape_count"] == len(numbers["events"])
+    assert figures.main(small + ["--replot"]) == 0  # from the store, no simulation
+    assert json.loads((tmp_path / "figS3.json").read_text())["events"] == numbers["events"]
+    with pytest.raises(SystemExit):
+        figures.main(["--out", str(tmp_path), "--only", "fig9"])
+
+
+def test_damping_sweeps_runs_each_command_small(tmp_path, capsys, restore_numba_threads):
+    # make damping-sweeps: the same work under each damping variant, one line per variant
+    damping = study("damping_sweeps")
+    coarse = ["--set", "rod.elements=24", "--set", "solver.refine_up_to=24"]
+    assert damping.main(["speed", "--steps", "50", "--rounds", "1", "--set", "rod.elements=48"]) == 0
+    assert damping.main(["fig3", "--samples", "1", "--chunk", "1", "--out", str(tmp_path)]
+                        + coarse) == 0
+    assert damping.main(["demo", "--variants", "default", "--out", str(tmp_path),
+                         "--set", "sweep.samples=2"] + coarse) == 0
+    # runs studies/figures.py in a process per variant
+    assert damping.main(["figures", "--variants", "default", "--only", "figS3", "--out",
+                         str(tmp_path), "--set", "rod.elements=24",
+                         "--set", "solver.hold_max_time=0.5"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"^default  dt [\d.e-]+ s  µs/step min [\d.]+", out, re.M)
+    assert re.search(r"^both     dt [\d.e-]+ s  µs/step min [\d.]+", out, re.M)
+    assert re.search(r"^both     1 points: .* phases \{'", out, re.M)
+    assert re.search(r"^both     phase differs from default at [01] points", out, re.M)
+    assert re.search(r"^default  2 runs: ", out, re.M)
+    assert re.search(r"^  figS3 ", out, re.M) and (tmp_path / "default" / "figS3.png").exists()
+    with pytest.raises(SystemExit):
+        damping.main(["speed", "--variants", "nonesuch"])
+
+
+def test_self_passage_tells_a_coarse_runs_link_jumps_apart(capsys):
+    # make self-passage: a Fig S3-like point (no end bodies) loses link around its end
+    assert study("self_passage").main([
+        "--twist-density", "1.6", "--extension", "1.04", "--elements", "24", "--interval", "0.01",
+        "--set", "ends.start_body=none", "--set", "ends.end_body=none",
+        "--set", "loading.twist_rate=1", "--set", "loading.quasi_static_below=0"]) == 0
+    out = capsys.readouterr().out
+    jumps = int(re.match(r"\w+: (\d+) link jump\(s\)", out).group(1))
+    verdicts = re.findall(r"^t = [\d.]+ s: ΔLk [+-][\d.]+, .*: (self-passage|twist wrap|around an "
+                          r"end)", out, re.M)
+    assert jumps >= 1 and len(verdicts) >= 1
+
+
+def test_vibration_source_holds_each_variant(capsys):
+    # make vibration-source: the settled coil held again under each variant of the model
+    assert study("vibration_source").main([
+        "--hold", "0.2", "--set", "rod.elements=64", "--set", "loading.twist_density=1.55",
+        "--set", "loading.twist_rate=2", "--set", "solver.hold_max_time=0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "kinetic energy [J] in s 0-0.05, 0.05-0.1, 0.1-0.15, 0.15-0.2" in out
+    rows = re.findall(r"^(.+) \| (ok|not_converged|unstable) \| ([^|]+) \|", out, re.M)
+    assert [name for name, _, _ in rows] == ["incompressible law (as run)",
+                                             "compressible (quadratic) law", "neo-Hookean law",
+                                             "no contact dashpot"]
+    assert float(rows[0][2].split(",")[0]) > 0
+
+
+def test_crosscheck_runs_the_first_moments_and_compares(tmp_path, capsys):
+    # make crosscheck: the example's settings in rodphase, against the stored PyElastica run
+    cc = study("crosscheck_pyelastica")
+    assert cc.main(["rodphase", "solenoid", "--final-time", "0.1",
+                    "-o", str(tmp_path / "rp.npz")]) == 0
+    assert cc.main(["compare", "solenoid", "--rodphase", str(tmp_path / "rp.npz"),
+                    "--png", str(tmp_path / "cc.png")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"^\| 0\.1 \| 0\.000 / 0\.000 \|", out, re.M)
+    assert (tmp_path / "cc.png").stat().st_size > 10_000
+    with pytest.raises(SystemExit):
+        cc.main(["rodphase", "trefoil"])
+
+
+def test_crosscheck_reference_runs_a_moment_of_pyelastica(tmp_path):
+    # make crosscheck-reference: hours in PyElastica 1.0 (the bench extra); here 200 steps
+    pytest.importorskip("elastica", reason="PyElastica is the bench extra (make bench-extra)")
+    cc = study("crosscheck_pyelastica")
+    assert cc.main(["reference", "solenoid", "--final-time", "0.005", "--raw",
+                    str(tmp_path / "raw.npz"), "-o", str(tmp_path / "reduced.npz")]) == 0
+    assert np.load(tmp_path / "reduced.npz")["time"].size >= 1
+
+
+# ------------------------------------------------------------------ in their own process
+
+def test_stability_map_bisects_a_few_rods(tmp_path, doc):
+    # make stability-map (pins NUMBA_NUM_THREADS when imported: its own process)
+    script("stability_map", "--quick", "--steps", "200", "--no-contact", "--json",
+           tmp_path / "map.json", "--png", tmp_path / "map.png", "--write", doc, cwd=tmp_path)
+    cases = json.loads((tmp_path / "map.json").read_text())["cases"]
+    assert {c["n"] for c in cases} == {20, 50}
+    assert all(0.3 < c["f_stable"] < 4.0 for c in cases)
+    assert (tmp_path / "map.png").stat().st_size > 10_000
+    assert "| straight | 20 |" in block(doc, "stability_map")
+
+
+def test_ramp_rate_compares_a_rate_with_the_reference(tmp_path, doc):
+    # make ramp-rate: sweeps through `rodphase sweep`, one point, coarse
+    script("ramp_rate", "--samples", "1", "--rates", "4", "--jobs", "1", "--out", tmp_path,
+           "--set", "rod.elements=24", "--set", "solver.refine_up_to=24", "--write", doc,
+           cwd=tmp_path)
+    text = block(doc, "ramp_rate")
+    assert re.search(r"^\| reference \(0\.5, n = 140, safety 0\.25\) \| 1 \| ", text, re.M)
+    assert re.search(r"^\| 4 \| 1 \| [\d.]+ \| \d+ \| \d+ \| \w+ 1 \| [01]/1 \|", text, re.M)
+    assert (tmp_path / "rate_4_1.h5").exists() and (tmp_path / "reference_1.h5").exists()
+
+
+def test_straight_start_compares_the_two_starts(tmp_path, doc):
+    # make straight-start: sweeps through `rodphase sweep`, one point, coarse
+    script("straight_start", "--samples", "1", "--rounds", "1", "--jobs", "1", "--out",
+           tmp_path, "--reference", tmp_path / "none.h5", "--set", "rod.elements=24",
+           "--set", "solver.refine_up_to=24", "--write", doc, cwd=tmp_path)
+    text = block(doc, "straight_start")
+    for variant in ("0", "0.8"):
+        assert re.search(rf"^\| {variant} \| 1 \| [\d.]+ \| \d+ \| \w+ 1 \| [01]/1 \|", text, re.M)
+
+
+# ------------------------------------------------------------------ every script has a runner
+
+def test_every_study_is_run_small_by_a_test():
+    here = Path(__file__).read_text()
+    for path in sorted(STUDIES.glob("*.py")):
+        name = path.stem
+        if name in ELSEWHERE:
+            assert f"studies/{name}.py" in (ROOT / "tests" / ELSEWHERE[name]).read_text()
+        else:
+            assert re.search(rf'study\("{name}"\)|script\("{name}"', here), (
+                f"studies/{name}.py has no smoke test in tests/test_studies_smoke.py")
+
+
+def test_every_benchmark_and_study_is_run_by_a_make_target():
+    # issue #27's done criterion is "reachable from a make target or a test"; every one of
+    # them has a target, which `make help` lists
+    recipes = (ROOT / "Makefile").read_text() + (STUDIES / "figures.mk").read_text()
+    run = set(re.findall(r"\$\(BIN\)/python ((?:benchmarks|studies)/\w+\.py)", recipes))
+    scripts = {f"{p.parent.name}/{p.name}" for d in (BENCHMARKS, STUDIES) for p in d.glob("*.py")}
+    assert scripts - run == set(), "scripts no make target runs"
+    assert run - scripts == set(), "make targets that run scripts that do not exist"
