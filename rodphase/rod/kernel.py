@@ -29,9 +29,9 @@ on the reference scenes, tests/test_kernel_cache.py). Six functions that run at 
 steps (_guards, _shear_guard, _record, _settle_windows, _probe_distance, _start_probe) are
 compiled on their own instead (inline="never"): every inlined call site is IR that numba
 types and lowers again inside advance, and these six cost 12 s of its first compile (60 → 48 s,
-scripts/compile_time.py functions). Their results are the inlined ones to the bit, compiled
+benchmarks/compile_time.py functions). Their results are the inlined ones to the bit, compiled
 fresh or loaded from the cache (positions, directors, history and snapshots of the reference
-scenes, scripts/reference_positions.py; tests/test_kernel_cache.py). Taken out the same way,
+scenes, benchmarks/reference_positions.py; tests/test_kernel_cache.py). Taken out the same way,
 _drift, rotated_frame, _kinetic_energy and the per-step loads were not: their last bits moved.
 """
 
@@ -1111,7 +1111,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     1/e and 1/e³ factors); anything else for the conservative law of neo_hookean.py. The
     choice is by type, so numba prunes the other law's branches before typing: each law is
     its own specialization, and the paper law's is the code from before the option (its
-    results bit-identical: scripts/reference_positions.py --compare).
+    results bit-identical: benchmarks/reference_positions.py --compare).
     """
     rest_length = rod.rest_length
     rest_voronoi = rod.rest_voronoi
