@@ -347,8 +347,10 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
               help="Phase map: a line under it with the sweep's parameters and run counts.")
 @click.option("--theory/--no-theory", default=True, show_default=True,
               help="Phase map: the straight rod's buckling twist along L/L0, the model's own "
-                   "(from its stiffness, at the sweep's resolution) and the unsheared clamped "
-                   "Greenhill twist (for a rod clamped at both ends under an end load).")
+                   "(from its stiffness, at the sweep's resolution), the sheared and the unsheared "
+                   "clamped Greenhill twist (for a rod clamped at both ends under an end load), "
+                   "and the measured critical twist per extension bin with its straight-line "
+                   "fit above L/L0 = 1.1.")
 @reports_errors
 def plot(store_file, kind, output, run_id, experiments, twist, background, size, caption,
          theory):
@@ -435,8 +437,14 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                 # 13 points (an onset each): phase_map draws a spline through them
                 lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12
                                              for i in range(13)])
+            critical = None
+            if theory and {"extension", "phase", column} <= set(table.columns):
+                from .tabulate import critical_twist
+
+                critical = critical_twist(table.assign(extension=table["extension"].astype(float)),
+                                          column)
             P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
-                        onset=lines)
+                        onset=lines, critical=critical)
         elif kind == "path":
             from .tabulate import path_table
 

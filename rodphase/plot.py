@@ -137,7 +137,9 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
             parts.append(f"load {loading['force_multiple']:g} F_C")
         elif loading.get("extension") is not None:
             parts.append(f"L/L0 {loading['extension']:g}")
-    parts.append(f"twisted at {loading.get('twist_rate', float('nan')):g} turns/s, "
+    slower = solver.get("slow_down_to") or 0
+    parts.append(f"twisted at {loading.get('twist_rate', float('nan')):g} turns/s"
+                 + (f" (down to {slower:g} where a guard stopped it)" if slower else "") + ", "
                  f"holds ≤ {solver.get('hold_max_time', float('nan')):g} s to equilibrium "
                  f"(tolerance {solver.get('hold_tolerance', float('nan')):g}), "
                  f"damping {solver.get('damping', float('nan')):g}/s")
@@ -153,7 +155,8 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
 def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | None = None,
               title: str | None = None, twist: str = "twist_density", caption: str | None = None,
               size: tuple[float, float] | str | None = None, ax=None,
-              onset: pd.DataFrame | None = None) -> Figure:
+              onset: pd.DataFrame | None = None,
+              critical: pd.DataFrame | None = None) -> Figure:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
     x = extension L/L0 ("extension"), y = twist density Φa (column `twist`: "twist_density",
@@ -170,7 +173,9 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
     "column" / "page" (a journal's single column, full width). `onset` (tabulate.onset_lines)
     draws the straight rod's buckling twist: the model's own (solid), the sheared clamped
     Greenhill twist (its n → ∞ limit, dotted blue) and the unsheared one (dashed), on the
-    same twist axis.
+    same twist axis. `critical` (tabulate.critical_twist of the same twist column) draws the
+    measured critical twist per extension bin (± half its bracket) and, where it has one,
+    its straight-line fit over the bins it was fitted to, with the fit in the legend.
     """
     if "extension" not in table.columns:
         raise ValueError(f"phase_map needs the column 'extension'; the table has "
@@ -249,6 +254,20 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                 handles += ax.plot(*_smooth(onset["extension"], onset[f"{column}_{reading}"]),
                                    style, color=colour, lw=1.0 if style != ":" else 1.4,
                                    zorder=1, label=label)
+
+        if critical is not None and len(critical):
+            handles.append(ax.errorbar(
+                critical["extension"], critical["critical"], yerr=critical["half_gap"],
+                fmt="_", ms=9, color=VERMILLION, elinewidth=1.0, capsize=0, zorder=4,
+                label="critical twist, measured"))
+            if critical.attrs.get("fit"):
+                slope, intercept, r2, _, above = critical.attrs["fit"]
+                fitted = critical[critical["extension"] > above]["extension"]
+                x = np.array([fitted.min(), fitted.max()])
+                handles += ax.plot(x, slope * x + intercept, "-.", color=VERMILLION, lw=1.0,
+                                   zorder=1, label=f"fit: {slope:.2f}·L/L0 "
+                                   f"{'−' if intercept < 0 else '+'} {abs(intercept):.2f}, "
+                                   f"R² {r2:.2f}")
 
         ax.set_ylabel(TWIST_DENSITY_LABEL if twist != "phi_a_current" else
                       r"twist density $\Phi a$ of the stretched rod (rad)")

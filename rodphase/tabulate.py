@@ -189,3 +189,38 @@ def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
         lines[f"{name}_current"] = units.current_twist_density(turns * to_phi, e)
     lines.attrs["elements"] = rod.elements
     return lines
+
+
+def critical_twist(table: pd.DataFrame, column: str = "phi_a_rest", bins: int = 10,
+                   above: float = 1.1) -> pd.DataFrame:
+    """The critical twist against extension of a classified sweep (the paper's Fig 3: "Φ_c
+    grows linearly with L/L0" at high extension). The runs with a shape are binned by
+    extension into `bins` equal bins; in each, the critical `column` is the midpoint between
+    the largest value still straight and the smallest that buckled (any other phase), ± half
+    their gap. A bin where a straight run lies above a buckled one (the ramp's overshoot, or
+    hysteresis) brackets nothing and is left out. Columns: extension (the bin's centre),
+    critical, half_gap. attrs["fit"]: (slope, intercept, R², bins used, above) of the straight
+    line through the bins above L/L0 = `above`, or None with fewer than 3 such bins."""
+    usable = table[table["phase"].isin(["straight", "plectoneme", "solenoid", "mixed"])]
+    rows = []
+    if len(usable):
+        edges = np.linspace(usable["extension"].min(), usable["extension"].max(), bins + 1)
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            cell = usable[(usable["extension"] >= lo) & (usable["extension"] <= hi)]
+            straight = cell[cell["phase"] == "straight"][column]
+            buckled = cell[cell["phase"] != "straight"][column]
+            if straight.empty or buckled.empty:
+                continue
+            below, over = straight.max(), buckled.min()
+            if below < over:
+                rows.append((0.5 * (lo + hi), 0.5 * (below + over), 0.5 * (over - below)))
+    points = pd.DataFrame(rows, columns=["extension", "critical", "half_gap"])
+    fit = points[points["extension"] > above]
+    points.attrs["fit"] = None
+    if len(fit) >= 3:
+        slope, intercept = np.polyfit(fit["extension"], fit["critical"], 1)
+        model = slope * fit["extension"] + intercept
+        r2 = 1 - np.sum((fit["critical"] - model) ** 2) / np.sum(
+            (fit["critical"] - fit["critical"].mean()) ** 2)
+        points.attrs["fit"] = (float(slope), float(intercept), float(r2), len(fit), above)
+    return points

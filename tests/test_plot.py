@@ -357,3 +357,50 @@ def test_movie_frames_say_time_and_twist_density(tmp_path):
 
     with Image.open(out) as gif:
         assert gif.n_frames == 3 and gif.size[1] == pytest.approx(1.5 * 150, abs=2)
+
+
+def _known_boundary(seed=0, samples=2000):
+    # points at ten bin centres between L/L0 1.0 and 1.3 (within a bin a sloped line would
+    # blur the bracket), a straight point at each end of the range (the bin edges), random
+    # Φa: straight below Φa_c = 2·L/L0 − 1, a plectoneme above
+    rng = np.random.default_rng(seed)
+    ext = np.r_[1.0, 1.3, rng.choice(1.015 + 0.03 * np.arange(10), samples)]
+    phi = np.r_[0.0, 0.0, rng.uniform(0.0, 2.6, samples)]
+    return pd.DataFrame({"extension": ext, "phi_a_rest": phi, "status": "ok",
+                         "alignment": np.where(phi < 2 * ext - 1, np.nan, -0.9),
+                         "phase": np.where(phi < 2 * ext - 1, "straight", "plectoneme")})
+
+
+def test_the_critical_twist_of_a_known_boundary_and_its_fit():
+    from rodphase.tabulate import critical_twist
+
+    points = critical_twist(_known_boundary(), "phi_a_rest")
+    assert len(points) == 10
+    # 200 random Φa per bin over [0, 2.6]: the bracket is ~0.03 wide, its midpoint on the line
+    assert np.allclose(points["critical"], 2 * points["extension"] - 1, atol=0.05)
+    slope, intercept, r2, used, above = points.attrs["fit"]
+    assert used == 7 and above == 1.1
+    assert slope == pytest.approx(2.0, abs=0.1) and intercept == pytest.approx(-1.0, abs=0.1)
+    assert r2 > 0.99
+    # a bin where a straight run lies above a buckled one brackets nothing and is left out
+    overshoot = pd.concat([_known_boundary(), pd.DataFrame(
+        {"extension": [1.015], "phi_a_rest": [2.5], "status": "ok", "alignment": [np.nan],
+         "phase": ["straight"]})], ignore_index=True)
+    assert len(critical_twist(overshoot, "phi_a_rest")) == 9
+    # fewer than three bins above 1.1: points but no fit
+    assert critical_twist(_known_boundary(), "phi_a_rest", above=1.25).attrs["fit"] is None
+
+
+def test_the_phase_map_draws_the_measured_critical_twist_and_its_fit(no_files):
+    from rodphase.tabulate import critical_twist
+
+    table = _known_boundary(samples=400)
+    critical = critical_twist(table, "phi_a_rest")
+    slope, intercept, r2, *_ = critical.attrs["fit"]
+    fig = plot.phase_map(table, twist="phi_a_rest", critical=critical)
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "critical twist, measured" in legend
+    assert f"fit: {slope:.2f}·L/L0 − {-intercept:.2f}, R² {r2:.2f}" in legend
+    fit_line = [line for line in fig.axes[0].get_lines() if line.get_label().startswith("fit")][0]
+    x, y = fit_line.get_data()
+    assert x[0] > 1.1 and np.allclose(y, slope * np.asarray(x) + intercept)
