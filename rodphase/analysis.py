@@ -44,13 +44,15 @@ def _nodes(points) -> np.ndarray:
 # ------------------------------------------------------------------ contact partners
 
 
-def partners(points, radius, rest_length=None, epsilon=0.2, min_separation=None) -> np.ndarray:
+def partners(points, radius, rest_length=None, epsilon=0.2, min_separation=None,
+             separation=5.0) -> np.ndarray:
     """Each element's partner in the paper's classifier (-1: none), shape (n,).
 
     The paper's rule (its Fig 3 classifier): for element i of a rod with nodes `points`
     (n+1, 3), the partner is the element k nearest in space, by midpoint distance, among
-    those far along the rod, |k − i| > min_separation (by default 5·n·a/L0, with the rest
-    radius a = `radius` and L0 = `rest_length`, which defaults to the polyline length), and
+    those far along the rod, |k − i| > min_separation (by default `separation`·n·a/L0, the
+    paper's 5 rest radii of arc, with the rest radius a = `radius` and L0 = `rest_length`,
+    which defaults to the polyline length), and
     within contact range, |x_k − x_i| < (2 + epsilon)·a. Both conditions are strict; of
     equally near candidates the lower index wins. This is the one definition of "partner"
     that the alignment classifier and every coil measurement use.
@@ -70,7 +72,10 @@ def partners(points, radius, rest_length=None, epsilon=0.2, min_separation=None)
         )
         if not L0 > 0.0:
             raise ValueError("points have zero length; give rest_length")
-        gap = 5.0 * n * a / L0
+        radii = float(separation)
+        if not (math.isfinite(radii) and radii >= 0.0):
+            raise ValueError(f"separation must be a finite number >= 0, got {separation!r}")
+        gap = radii * n * a / L0
     else:
         gap = float(min_separation)
         if not (math.isfinite(gap) and gap >= 0.0):

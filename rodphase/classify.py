@@ -19,16 +19,20 @@ __all__ = ["PHASES", "UNSEEN_COIL_WRITHE", "alignment", "phase", "phase_code", "
 PHASES = ("straight", "plectoneme", "solenoid", "mixed")
 
 
-def alignment(points, radius, rest_length=None, epsilon=0.2, min_separation=None) -> float:
+def alignment(points, radius, rest_length=None, epsilon=0.2, min_separation=None,
+              separation=5.0) -> float:
     """The paper's alignment of a rod with nodes `points` (n+1, 3) and rest radius `radius`.
 
     Elements i and k count as neighbours when their midpoints are closer than
-    (2 + epsilon) * radius and |k - i| > min_separation, by default 5 n radius / rest_length
-    (rest_length defaults to the polyline length of `points`). Each element takes its
+    (2 + epsilon) * radius and |k - i| > min_separation, by default separation·n·radius /
+    rest_length: `separation` rest radii of arc, the paper's 5 (rest_length defaults to the
+    polyline length of `points`). A coil whose turns are shorter than that many radii of
+    arc (the tightest solenoids above L/L0 ≈ 1.165, docs/reproduction.md) has no partners
+    and reads as straight: a smaller `separation` sees it. Each element takes its
     nearest such neighbour (`rodphase.analysis.partners`). Returns NaN when no element has
     one (a straight or open shape).
     """
-    partner = partners(points, radius, rest_length, epsilon, min_separation)
+    partner = partners(points, radius, rest_length, epsilon, min_separation, separation)
     paired = partner >= 0
     if not np.any(paired):
         return math.nan

@@ -281,8 +281,13 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
               help="Alignment below this is a plectoneme.")
 @click.option("--solenoid-above", default=0.5, show_default=True, type=float,
               help="Alignment above this is a solenoid (between: mixed).")
+@click.option("--separation", default=5.0, show_default=True, type=click.FloatRange(0, 50),
+              help="Partner separation in rest radii of arc: elements closer along the rod "
+                   "are never partners. 5 is the paper's; a coil whose turns are shorter "
+                   "(the tightest solenoids above L/L0 ≈ 1.165) reads as straight with it, "
+                   "and e.g. 4 sees it.")
 @reports_errors
-def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
+def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above, separation):
     """Label every run of OUT.h5 by loop alignment and store the table back into it.
 
     \b
@@ -294,7 +299,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above):
     from .tabulate import classify_store, classify_table
 
     thresholds = dict(epsilon=epsilon, plectoneme_below=plectoneme_below,
-                      solenoid_above=solenoid_above)
+                      solenoid_above=solenoid_above, separation=separation)
     try:
         store = edit_store(store_file)
         busy = None

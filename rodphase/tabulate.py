@@ -10,8 +10,10 @@ from .classify import alignment, phase, unseen_coil
 from .result import rotation_put_in
 
 
-def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5) -> dict:
-    """One row of the table from a RunResult (ok or not)."""
+def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5,
+              separation=5.0) -> dict:
+    """One row of the table from a RunResult (ok or not); `separation` (rest radii of arc)
+    is the classifier's partner separation (classify.alignment)."""
     d = result.diagnostics
     rest_length = float(d.get("rest_length", np.nan))
     radius = float(d.get("rest_radius", np.nan))
@@ -19,7 +21,8 @@ def summarize(result, *, epsilon=0.2, plectoneme_below=-0.5, solenoid_above=0.5)
            "steps": int(d.get("steps", 0)), "elements": int(d.get("elements", 0))}
     if result.status == "error" or not len(result.history.get("time", [])):
         return row | {"alignment": np.nan, "phase": "failed"}
-    value = alignment(result.positions, radius, rest_length=rest_length, epsilon=epsilon)
+    value = alignment(result.positions, radius, rest_length=rest_length, epsilon=epsilon,
+                      separation=separation)
     row["alignment"] = value
     # a hold that ran out of time still has a shape (status says it crept); a blow-up has not
     shaped = result.status in ("ok", "not_converged")

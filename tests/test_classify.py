@@ -241,3 +241,21 @@ def test_a_coil_tighter_than_the_partner_separation_is_flagged_not_hidden():
     assert not unseen_coil("straight", 0.0)
     assert not unseen_coil("solenoid", turns)
     assert not unseen_coil("straight", float("nan"))
+
+
+def test_a_smaller_partner_separation_sees_the_coil_the_papers_cannot():
+    # The same 0.6a-radius coil as above: each turn is 4.3a of arc. With the partner
+    # separation at 4 rest radii (below a turn), neighbouring turns 2.05a apart become
+    # partners and run parallel: a solenoid (+1). A plectoneme's strands are partners far
+    # along the rod whatever the separation, so 4 leaves it antiparallel (−1); a separation
+    # above a turn's arc (5, the paper's) still hides the coil.
+    coil = resample(chain(line((0.0, 0.0, -10 * A), (0.6 * A, 0.0, 0.0)),
+                          helix((0.0, 0.0), 0.6 * A, GAP, 6),
+                          line(helix((0.0, 0.0), 0.6 * A, GAP, 6)[-1], (0.0, 0.0, 6 * GAP + 10 * A))),
+                    0.2 * A)
+    assert math.isnan(alignment(coil, A, separation=5.0))
+    assert alignment(coil, A, separation=4.0) == pytest.approx(1.0, abs=0.05)
+    assert phase(alignment(coil, A, separation=4.0)) == "solenoid"
+    assert alignment(ideal_plectoneme(), A, separation=4.0) < -0.9
+    with pytest.raises(ValueError, match="separation"):
+        alignment(coil, A, separation=-1.0)
