@@ -169,11 +169,12 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
         if value != allowed:
             raise C.ConfigError(key, value, f"{allowed!r} with loading.quasi_static_below > 0 "
                                 "(the straight rod's buckling twist is known for that rod only)")
-    for key in ("bend_stiffness", "twist_stiffness", "shear_stiffness", "axial_stiffness"):
-        if cfg.material[key] is not None:
-            raise C.ConfigError("material." + key, cfg.material[key],
-                                "null with loading.quasi_static_below > 0 (the buckling twist "
-                                "is known for a solid isotropic cylinder only)")
+    # given bending, twist and shear stiffnesses are the rod's own (rod_from), and so is its
+    # onset; a given axial stiffness is not what the load's extension e assumes (E·A0)
+    if cfg.material.axial_stiffness is not None:
+        raise C.ConfigError("material.axial_stiffness", cfg.material.axial_stiffness,
+                            "null with loading.quasi_static_below > 0 (the straight start "
+                            "stretches the rod by the load's extension of E·A0)")
     if any(cfg.physics.gravity):
         raise C.ConfigError("physics.gravity", list(cfg.physics.gravity),
                             "[0, 0, 0] with loading.quasi_static_below > 0")

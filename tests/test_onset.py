@@ -254,3 +254,38 @@ def test_a_rod_compressed_past_euler_has_no_onset_and_says_so():
     with pytest.raises(ValueError, match="unstable without twist"):
         onset.straight_onset_turns(Rod(length=L0, radius=A0, elements=20, incompressible=False),
                                    0.99)
+
+
+def test_a_straight_start_with_given_stiffnesses_is_that_rods_equilibrium():
+    # shear × 10 and half the twist stiffness (issue #29's shear study): the start is taken
+    # below the onset of the rod with those stiffnesses (its onset, not the paper rod's: half
+    # the twist stiffness nearly doubles the turns), on its straight equilibrium: held 0.5 s
+    # it neither moves (< 1e-9 L0 at the nodes: round-off of the equilibrium) nor writhes.
+    # A given axial stiffness is refused: the start stretches by the load's E·A0 extension.
+    from rodphase import config as C
+    from rodphase import runner
+    from rodphase.scenes import SCENES, build, rod_from
+
+    base_rod = paper_rod(40)
+    base = [("rod.elements", 40), ("loading.force_multiple", None), ("loading.extension", 1.15),
+            ("loading.twist_density", None), ("loading.quasi_static_below", 0.9),
+            ("material.shear_stiffness", 10 * base_rod.shear_stiffness),
+            ("material.twist_stiffness", 0.5 * base_rod.twist_stiffness),
+            ("solver.hold_until", "time"), ("solver.hold_max_time", 0.5),
+            ("rod.imperfection", 0.0)]  # the perfect rod: its straight state is exact
+    rod = rod_from(C.load_scene("twist_under_load", base, SCENES))
+    own = onset.straight_onset_turns(rod, 1.15, tolerance=1e-4)
+    assert own > 1.5 * onset.straight_onset_turns(base_rod, 1.15, tolerance=1e-4)
+    turns = 0.85 * own
+    cfg = C.load_scene("twist_under_load", base + [("loading.twist_turns", turns)], SCENES)
+    problem = build(cfg)
+    start = problem.state.positions.copy()
+    result = runner.run(problem, topology=True)
+    assert result.status == "ok", result.message
+    assert result.history["end_rotation"][0] == pytest.approx(turns * 2 * math.pi)
+    assert np.abs(result.positions - start).max() < 1e-9 * L0
+    assert abs(result.history["writhe"][-1]) < 1e-3
+    with pytest.raises(C.ConfigError, match="material.axial_stiffness"):
+        build(C.load_scene("twist_under_load", base + [("loading.twist_turns", turns),
+                                                      ("material.axial_stiffness", 2000.0)],
+                           SCENES))
