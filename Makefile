@@ -99,7 +99,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 ##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
 .PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
-	robustness
+	robustness study-shear study-damping study-friction study-neo-hookean
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -139,6 +139,17 @@ damping-sweeps: $(STAMP)  ## holds that settle: the damping variants on the figu
 
 ramp-rate: $(STAMP)  ## Fig 3's twist ramp at several rates against a fine reference (docs/performance.md)
 	$(BIN)/python studies/ramp_rate.py --rates 0.25,0.5,1,2 --jobs $(JOBS) --out $(OUT)/ramp --write docs/performance.md
+
+# issue #29 item 4: Fig 3 under one change at a time, point by point against the map as it ships
+VARIANTS_RUN = $(BIN)/python studies/map_variants.py --jobs $(JOBS) --out $(OUT)/variants --write docs/reproduction.md
+study-shear: $(STAMP)  ## Fig 3 with shear stiffness x 10 and G = E/3 against the default (reproduction.md)
+	$(VARIANTS_RUN) shear_x10 g_e3 --figure docs/img/map_shear.png
+study-damping: $(STAMP)  ## Fig 3 at half and twice the damping and without the quadratic drag
+	$(VARIANTS_RUN) damping_half damping_twice no_drag --figure docs/img/map_damping.png
+study-friction: $(STAMP)  ## Fig 3 with self-contact friction 0.2 and 0.5
+	$(VARIANTS_RUN) friction_0.2 friction_0.5 --figure docs/img/map_friction.png
+study-neo-hookean: $(STAMP)  ## Fig 3 with the conservative neo-Hookean law (from rest)
+	$(VARIANTS_RUN) neo_hookean --figure docs/img/map_neo_hookean.png
 
 # the random sweep is fig3's; the reference (24 x 24 by continuation) and the adaptive one are its own
 boundary-error: fig3  ## phase-boundary error of random and adaptive sampling against a 24 x 24 reference

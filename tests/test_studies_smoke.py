@@ -264,6 +264,23 @@ def test_straight_start_compares_the_two_starts(tmp_path, doc):
         assert re.search(rf"^\| {variant} \| 1 \| [\d.]+ \| \d+ \| \w+ 1 \| [01]/1 \|", text, re.M)
 
 
+def test_map_variants_compares_a_variant_with_the_default_point_by_point(tmp_path, doc):
+    # make study-shear and the others: sweeps through `rodphase sweep`, one point, coarse
+    script("map_variants", "shear_x10", "--samples", "1", "--jobs", "1", "--out", tmp_path,
+           "--set", "rod.elements=24", "--set", "solver.refine_up_to=24", "--write", doc,
+           "--figure", tmp_path / "maps.png", cwd=tmp_path)
+    text = block(doc, "map_variants_shear_x10")
+    assert re.search(r"^\| as it ships \| straight \d, plectoneme \d, .* \| — \| — \|", text, re.M)
+    assert re.search(r"^\| shear stiffness × 10 \| .* \| [01]/1 \| ", text, re.M)
+    assert (tmp_path / "shear_x10_1.h5").exists() and (tmp_path / "maps.png").stat().st_size > 5000
+    # the variant's store holds the stiffer shear: 10 × the shipped scene's 4GA0/3
+    from rodphase import api
+
+    with api.open(tmp_path / "shear_x10_1.h5") as store:
+        config = store.attrs["config_yaml"]
+    assert "shear_stiffness: 17453" in config
+
+
 # ------------------------------------------------------------------ every script has a runner
 
 def test_every_study_is_run_small_by_a_test():
