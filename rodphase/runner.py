@@ -342,6 +342,7 @@ def run_scene(scene, *, topology: bool | None = None,
     floor = cfg.solver.slow_down_to
     while (floor > 0 and stored is None and not extra
            and result.diagnostics.get("guard") in SLOWABLE_GUARDS
+           and result.diagnostics.get("stages")
            and _turning(origin, len(result.diagnostics["stages"]) - 1)
            and rates[-1] / 2 >= floor * (1 - 1e-9)):
         wall_before += result.diagnostics["wall_time"]  # its coarser tries are in already
