@@ -117,7 +117,7 @@ def test_the_margin_holds_at_the_top_of_the_fig3_box():
     (("material.law", "neo_hookean"), "material.law"),
     (("physics.gravity", [0.0, -9.81, 0.0]), "physics.gravity"),
     (("ends.end_rotation", "free"), "ends.end_rotation"),
-    (("material.twist_stiffness", 1e-3), "material.twist_stiffness"),
+    (("material.axial_stiffness", 2000.0), "material.axial_stiffness"),
 ])
 def test_a_rod_without_a_known_onset_is_refused_by_name(override, key):
     cfg = C.load_scene("twist_under_load", [override, ("loading.quasi_static_below", 0.8)],
