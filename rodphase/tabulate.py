@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 
 from . import units
-from .classify import alignment, phase, unseen_coil
+from .classify import PHASES, alignment, phase, unseen_coil
 from .result import rotation_put_in
 
 
@@ -204,7 +204,7 @@ def critical_twist(table: pd.DataFrame, column: str = "phi_a_rest", bins: int = 
     hysteresis) brackets nothing and is left out. Columns: extension (the bin's centre),
     critical, half_gap. attrs["fit"]: (slope, intercept, R², bins used, above) of the straight
     line through the bins above L/L0 = `above`, or None with fewer than 3 such bins."""
-    usable = table[table["phase"].isin(["straight", "plectoneme", "solenoid", "mixed"])]
+    usable = table[table["phase"].isin(PHASES)]
     rows = []
     if len(usable):
         edges = np.linspace(usable["extension"].min(), usable["extension"].max(), bins + 1)

@@ -209,23 +209,25 @@ def _perfect(rod: Rod) -> Rod:
 
 def greenhill_turns(rod: Rod, extension: float) -> float:
     """The unsheared clamped Greenhill twist [turns] of the rod stretched to `extension` under
-    the paper's law (theory.stretched_greenhill_turns)."""
-    from ..theory import stretched_greenhill_turns
-
-    tension = rod.axial_stiffness * (1.0 - 1.0 / extension)
-    return stretched_greenhill_turns(tension, extension, rod.length, rod.bending_stiffness,
-                                     rod.twist_stiffness)
+    the paper's law (theory.stretched_greenhill_turns: the sheared twist at S = ∞)."""
+    return _clamped_greenhill_turns(rod, extension, math.inf)
 
 
 def sheared_greenhill_turns(rod: Rod, extension: float) -> float:
     """The clamped Greenhill twist [turns] of the rod stretched to `extension` under the
     paper's law, with its shear stiffness (theory.sheared_greenhill_turns): the n → ∞ limit
     of straight_onset_turns for the paper's law (tests/test_theory_shear.py)."""
+    return _clamped_greenhill_turns(rod, extension, rod.shear_stiffness)
+
+
+def _clamped_greenhill_turns(rod: Rod, extension: float, shear: float) -> float:
+    """theory.sheared_greenhill_turns of `rod` stretched to `extension` by the tension of its
+    law, with shear stiffness `shear` [N] (math.inf: unshearable)."""
     from ..theory import sheared_greenhill_turns as turns
 
     tension = rod.axial_stiffness * (1.0 - 1.0 / extension)
     return turns(tension, extension, rod.length, rod.bending_stiffness, rod.twist_stiffness,
-                 rod.shear_stiffness)
+                 shear)
 
 
 def compile_static() -> None:
