@@ -1,5 +1,6 @@
 """What the scripts of benchmarks/ and studies/ share: the machine a number was measured on,
-the named Markdown block of docs/ a script rewrites, and sweep stores read point by point.
+the named Markdown block of docs/ a script rewrites, a sweep run through the CLI, and sweep
+stores read point by point.
 
 Nothing in the package calls these; they live here, not in a scripts module, so that every
 script imports them the same way (``from rodphase.studytools import write_block``) wherever
@@ -40,6 +41,27 @@ def write_block(doc: Path, name: str, text: str) -> None:
         body += f"\n{begin}\n{text}\n{end}\n"
     doc.write_text(body)
     print(f"updated {doc} ({name})")
+
+
+def classified_sweep(config: str, path: Path, sets: list[str], jobs: int) -> float:
+    """`rodphase sweep CONFIG -o PATH --jobs JOBS --quiet --set ...` (a new store, or the
+    stored one resumed), then `rodphase classify PATH`; the sweep's wall time [s]. A sweep
+    whose runs partly failed (exit 1: they are recorded) is fine; any other exit stops."""
+    import subprocess
+    import sys
+    import time
+
+    rodphase = str(Path(sys.executable).with_name("rodphase"))
+    args = [rodphase, "sweep", config, "-o", str(path), "--jobs", str(jobs), "--quiet"]
+    for item in sets:
+        args += ["--set", item]
+    t0 = time.perf_counter()
+    done = subprocess.run(args)
+    wall = time.perf_counter() - t0
+    if done.returncode not in (0, 1):
+        raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
+    subprocess.run([rodphase, "classify", str(path)], check=True, capture_output=True)
+    return wall
 
 
 def sweep_table(path: Path):

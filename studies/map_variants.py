@@ -25,16 +25,14 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLA
     os.environ.setdefault(_var, "1")
 
 import argparse
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from rodphase.studytools import machine, same_points, sweep_table, write_block
+from rodphase.studytools import classified_sweep, machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 CONFIG = "fig3_paper"
 
 
@@ -66,14 +64,7 @@ def variants() -> dict[str, tuple[str, list[str]]]:
 
 def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> None:
     """Run (or resume) one sweep of CONFIG and classify it."""
-    args = [RODPHASE, "sweep", CONFIG, "-o", str(path), "--jobs", str(jobs), "--quiet",
-            "--set", f"sweep.samples={samples}"]
-    for item in sets:
-        args += ["--set", item]
-    done = subprocess.run(args)
-    if done.returncode not in (0, 1):  # 1: some runs failed, recorded
-        raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
-    subprocess.run([RODPHASE, "classify", str(path)], check=True, capture_output=True)
+    classified_sweep(CONFIG, path, [f"sweep.samples={samples}"] + sets, jobs)
 
 
 def compare(default, table) -> tuple[int, list[str]]:

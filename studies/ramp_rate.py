@@ -29,17 +29,14 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLA
     os.environ.setdefault(_var, "1")
 
 import argparse
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from rodphase.studytools import machine, same_points, sweep_table, write_block
+from rodphase.studytools import classified_sweep, machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 CONFIG = "fig3_paper"
 REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static_below=0"]
 
@@ -47,17 +44,9 @@ REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static
 def sweep(path: Path, sets: list[str], samples: int, jobs: int) -> float:
     """Run (or resume) one sweep and classify it; returns its wall time in seconds (NaN for a
     store that existed: the sweep's own time is in the table written then)."""
-    args = [RODPHASE, "sweep", CONFIG, "-o", str(path), "--jobs", str(jobs), "--quiet",
-            "--set", f"sweep.samples={samples}"]
-    for item in sets:
-        args += ["--set", item]
     resumed = path.exists()  # its wall time would be the resume's, not the sweep's
-    t0 = time.perf_counter()
-    done = subprocess.run(args)
-    if done.returncode not in (0, 1):  # 1: some runs failed, recorded
-        raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
-    subprocess.run([RODPHASE, "classify", str(path)], check=True, capture_output=True)
-    return float("nan") if resumed else time.perf_counter() - t0
+    wall = classified_sweep(CONFIG, path, [f"sweep.samples={samples}"] + sets, jobs)
+    return float("nan") if resumed else wall
 
 
 def main(argv=None) -> int:

@@ -27,15 +27,13 @@ import argparse
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from rodphase.studytools import machine, same_points, sweep_table, write_block
+from rodphase.studytools import classified_sweep, machine, same_points, sweep_table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 CONFIG = "fig3_paper"
 
 
@@ -47,16 +45,7 @@ def fresh_sweep(path: Path, sets: list[str], jobs: int) -> float:
             shutil.rmtree(old)
         elif old.exists():
             old.unlink()
-    args = [RODPHASE, "sweep", CONFIG, "-o", str(path), "--jobs", str(jobs), "--quiet"]
-    for item in sets:
-        args += ["--set", item]
-    t0 = time.perf_counter()
-    done = subprocess.run(args)
-    wall = time.perf_counter() - t0
-    if done.returncode not in (0, 1):  # 1: some runs failed, recorded
-        raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
-    subprocess.run([RODPHASE, "classify", str(path)], check=True, capture_output=True)
-    return wall
+    return classified_sweep(CONFIG, path, sets, jobs)
 
 
 def main(argv=None) -> int:
