@@ -46,7 +46,8 @@ clean:  ## remove outputs (keeps .venv)
 ##@ Benchmarks (benchmarks/; the timings depend on the machine and its load, see docs/benchmarks.md)
 # `make bench` is the four that docs/benchmarks.md reports; each script also has its own target.
 .PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
-	bench-interleaved bench-laws bench-step-parts bench-work-precision bit-identical base-tree
+	bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods \
+	bit-identical base-tree
 BASE ?= main
 BASE_TREE = $(OUT)/base-rodphase
 
@@ -90,6 +91,10 @@ bench-step-parts: $(STAMP)  ## where a Fig 3 step goes; what a Newton iteration 
 
 bench-work-precision: $(STAMP)  ## error against CPU time over n and dt (docs/performance.md, ~7 min)
 	$(BIN)/python benchmarks/work_precision.py --write docs/performance.md
+
+bench-map-methods: $(STAMP)  ## Fig 3 independent vs along paths: CPU, wall, boundary error against a fine reference (~35 min)
+	@test -f out/perf/map_reference.h5 || $(BIN)/python benchmarks/map_methods.py reference
+	$(BIN)/python benchmarks/map_methods.py compare --rounds 2 --write
 
 bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tree bit-identical to BASE (default main)?
 	PYTHONPATH=$(abspath $(BASE_TREE)) $(BIN)/python benchmarks/reference_positions.py $(OUT)/positions_base.npz

@@ -388,9 +388,13 @@ SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
     "scene": (text, REQUIRED),
     "set": (None, {}),
     "axes": (None, REQUIRED),
-    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive"), "random"),
+    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive", "paths"),
+                "random"),
     "samples": (number(1, 100000, integer=True), 12),
     "seed": (number(0, integer=True), 0),
+    # the paths sampler's count of columns (loads); null: the square root of samples. Only
+    # kept when given, so that no other sweep's hash moves
+    "columns": (number(1, 100000, integer=True, nullable=True), None),
 }
 
 # sweep axes in the paper's dimensionless units and where they go in the scene
@@ -759,6 +763,21 @@ def validate_sweep(raw: Any) -> Frozen:
     if "extension" in checked and "force_multiple" in checked:
         raise ConfigError("sweep.axes.force_multiple", checked["force_multiple"],
                           "not together with extension (both set the load)")
+    if out["columns"] is None:
+        del out["columns"]
+    elif out["sampler"] != "paths":
+        raise ConfigError("sweep.columns", out["columns"], "only with sweep.sampler: paths")
+    else:
+        out["columns"] = int(out["columns"])
+    if out["sampler"] == "paths":
+        twist = [name for name in checked if name.startswith("twist_density")]
+        if len(checked) != 2 or len(twist) != 1:
+            raise ConfigError("sweep.axes", {k: list(v) for k, v in checked.items()},
+                              "with sweep.sampler: paths, two axes: a twist density and a "
+                              "load (extension or force_multiple); each column is one load")
+        if out.get("columns", 1) > out["samples"]:
+            raise ConfigError("sweep.columns", out["columns"],
+                              f"at most sweep.samples ({out['samples']})")
     out["axes"] = Frozen(checked)
     out["set"] = Frozen(out["set"])
     return Frozen(out)

@@ -159,6 +159,23 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
     frame, so that the end rotation control carries the turns already in."""
     from .rod.onset import straight_equilibrium, straight_start_turns
 
+    check_straight_start(cfg)
+    extension = C.straight_extension(cfg)
+    try:
+        turns = straight_start_turns(rod, extension, first_target, fraction)
+    except ValueError as error:  # under-resolved for the onset's twist
+        raise C.ConfigError("rod.elements", rod.elements,
+                            f"{error}, with loading.quasi_static_below > 0") from None
+    # along the axis from the origin, every element stretched to the load's extension e; the
+    # clamp reference is the untwisted straight rod's frame (all its frames are alike, and so
+    # are the frames clamp_frames would extrapolate from them)
+    start = straight_equilibrium(rod, extension, turns)
+    return start.state, start.clamp_reference, turns
+
+
+def check_straight_start(cfg) -> None:
+    """Refuse (ConfigError) a scene whose straight loaded rod is not the branch the straight
+    start knows: clamped, pulled by a force, the paper's incompressible law, no gravity."""
     e = cfg.ends
     needs = {"ends.start": (e.start, "clamped"), "ends.end_axial": (e.end_axial, "force"),
              "ends.end_lateral": (e.end_lateral, "held"),
@@ -178,17 +195,6 @@ def _quasi_static_start(cfg, rod: Rod, force: float, fraction: float, first_targ
     if any(cfg.physics.gravity):
         raise C.ConfigError("physics.gravity", list(cfg.physics.gravity),
                             "[0, 0, 0] with loading.quasi_static_below > 0")
-    extension = C.straight_extension(cfg)
-    try:
-        turns = straight_start_turns(rod, extension, first_target, fraction)
-    except ValueError as error:  # under-resolved for the onset's twist
-        raise C.ConfigError("rod.elements", rod.elements,
-                            f"{error}, with loading.quasi_static_below > 0") from None
-    # along the axis from the origin, every element stretched to the load's extension e; the
-    # clamp reference is the untwisted straight rod's frame (all its frames are alike, and so
-    # are the frames clamp_frames would extrapolate from them)
-    start = straight_equilibrium(rod, extension, turns)
-    return start.state, start.clamp_reference, turns
 
 
 def solenoid_loss(cfg) -> Problem:

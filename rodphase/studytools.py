@@ -47,6 +47,13 @@ def classified_sweep(config: str, path: Path, sets: list[str], jobs: int) -> flo
     """`rodphase sweep CONFIG -o PATH --jobs JOBS --quiet --set ...` (a new store, or the
     stored one resumed), then `rodphase classify PATH`; the sweep's wall time [s]. A sweep
     whose runs partly failed (exit 1: they are recorded) is fine; any other exit stops."""
+    return timed_sweep(config, path, sets, jobs)[0]
+
+
+def timed_sweep(config: str, path: Path, sets: list[str], jobs: int) -> tuple[float, float]:
+    """classified_sweep's sweep, and its cost: (wall [s], CPU [s]: user + system of the
+    sweep process and the workers it waited for, the compile included)."""
+    import resource
     import subprocess
     import sys
     import time
@@ -55,13 +62,18 @@ def classified_sweep(config: str, path: Path, sets: list[str], jobs: int) -> flo
     args = [rodphase, "sweep", config, "-o", str(path), "--jobs", str(jobs), "--quiet"]
     for item in sets:
         args += ["--set", item]
-    t0 = time.perf_counter()
+
+    def children() -> float:
+        usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return usage.ru_utime + usage.ru_stime
+
+    cpu0, t0 = children(), time.perf_counter()
     done = subprocess.run(args)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, children() - cpu0
     if done.returncode not in (0, 1):
         raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
     subprocess.run([rodphase, "classify", str(path)], check=True, capture_output=True)
-    return wall
+    return wall, cpu
 
 
 def sweep_table(path: Path):
@@ -79,3 +91,20 @@ def same_points(a, b, axes=("twist_density", "extension")) -> bool:
 
     n = min(len(a), len(b))
     return all(np.allclose(a[k][:n], b[k][:n], rtol=1e-9) for k in axes if k in a and k in b)
+
+
+def boundary_error(reference, samples, axes, lo, span) -> float:
+    """The share of `reference` points (a table with a phase column) whose phase the nearest
+    point of `samples` (failed ones left out) gets wrong, nearest in the `axes` coordinates
+    scaled to the box (lo, span): the area of the box the boundaries `samples` imply
+    misplace."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    def scaled(table):
+        return (table[list(axes)].to_numpy(float) - lo) / span
+
+    usable = samples[samples["phase"] != "failed"]
+    _, nearest = cKDTree(scaled(usable)).query(scaled(reference))
+    guessed = usable["phase"].to_numpy()[nearest]
+    return float(np.mean(guessed != reference["phase"].to_numpy()))

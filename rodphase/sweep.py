@@ -66,15 +66,41 @@ def _grid(axes: dict, samples: int, seed: int) -> np.ndarray:
     return np.array(list(itertools.product(ticks, repeat=len(axes))))
 
 
+def _paths(axes: dict, samples: int, seed: int, columns: int | None = None) -> np.ndarray:
+    """Random columns with random twists in each: the loads (the axis that is not a twist)
+    are the first `columns` points of a scrambled Sobol sequence (random, evenly spread),
+    and each column's twists are stratified at random: its share of the samples, one in
+    each equal slice of the twist axis, uniform within the slice. Column by column, in
+    increasing load; the samples split as evenly as they can (the first columns take one
+    more). `columns` defaults to the square root of `samples`."""
+    names = list(axes)
+    twist = next(i for i, name in enumerate(names) if name.startswith("twist_density"))
+    count = columns if columns is not None else max(1, round(math.sqrt(samples)))
+    rng = np.random.default_rng(seed)
+    loads = np.sort(_sobol({"load": None}, count, seed)[:, 0])
+    rows = []
+    for c, load in enumerate(loads):
+        m = samples // count + (c < samples % count)
+        for u in (np.arange(m) + rng.random(m)) / m:
+            row = [load, load]
+            row[twist] = u
+            rows.append(row)
+    return np.array(rows).reshape(-1, len(names))
+
+
 SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "sobol": _sobol, "grid": _grid,
-                                 "continuation": _grid, "adaptive": _lhs}
+                                 "continuation": _grid, "adaptive": _lhs, "paths": _paths}
 
 
 def sample_points(sweep) -> list[dict[str, float]]:
     """The sweep's samples in the axes' own units, in a fixed order (same seed → same list)."""
     names = list(sweep.axes)
     try:
-        unit = SAMPLERS[sweep.sampler](sweep.axes, sweep.samples, sweep.seed)
+        sampler = SAMPLERS[sweep.sampler]
+        if sweep.sampler == "paths":
+            unit = sampler(sweep.axes, sweep.samples, sweep.seed, sweep.get("columns"))
+        else:
+            unit = sampler(sweep.axes, sweep.samples, sweep.seed)
     except KeyError:
         raise C.ConfigError("sweep.sampler", sweep.sampler, "one of " + ", ".join(SAMPLERS)) from None
     points = []
@@ -103,6 +129,7 @@ class Job:
     params: list[dict]
     scene: C.Frozen  # the validated scene: workers use it as it is, without validating again
     twist_targets: list[float] | None = None  # turns, ascending, one per run id
+    column: object | None = None  # the paths sampler's column (paths.Column): run as a path
     # a scene builder registered at run time (not one of rodphase's): the workers are other
     # processes that never saw the registration, so the job carries it
     builder: Callable | None = None
@@ -129,11 +156,19 @@ def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
         SCENES[job.scene["scene"]] = job.builder  # the latest definition, in a reused worker too
     with single_threaded_numba():
         try:
-            result = run_scene(job.scene, twist_targets=job.twist_targets)
+            if job.column is not None:
+                from .paths import run_column
+
+                results = run_column(job.column)
+            else:
+                result = run_scene(job.scene, twist_targets=job.twist_targets)
         except Exception:  # a bug, not a physical failure: keep the sweep going, record it
             error = traceback.format_exc(limit=4)
             return [(rid, p, None, error) for rid, p in zip(job.run_ids, job.params)]
     policy = snapshot_policy(job.scene, "final")
+    if job.column is not None:
+        return [(rid, p, keep_snapshots(r, policy), "")
+                for rid, p, r in zip(job.run_ids, job.params, results)]
     if job.twist_targets is None:
         return [(job.run_ids[0], job.params[0], keep_snapshots(result, policy), "")]
     incompressible = job.scene["material"]["incompressible"]
@@ -185,6 +220,8 @@ def split_continuation(result: RunResult, k: int, incompressible: bool = True) -
 
     stages = result.diagnostics.get("stages", [])
     index = next((i for i, st in enumerate(stages) if st.get("sample") == k), None)
+    if index is not None and result.status == "unstable" and index == len(stages) - 1:
+        index = None  # a guard stopped the run in this hold: the sample was not reached
     if index is None:
         return replace(result, status=result.status if result.status != "ok" else "error",
                        message=f"the continuation stopped before sample {k}: {result.message}",
@@ -240,22 +277,47 @@ def plan(sweep, scene) -> list[Job]:
             raise C.ConfigError(f"sample {index} ({_describe(point)}): {exc.path}", exc.value,
                                 exc.allowed) from None
         checked.append((f"run-{index:05d}", dict(point), cfg))
-    if sweep.sampler != "continuation":
+    if sweep.sampler not in ("continuation", "paths"):
         return [Job([rid], [p], cfg, builder=builder) for rid, p, cfg in checked]
     twist_axis = next((a for a in ("twist_density", "twist_density_current") if a in sweep.axes),
                       None)
     if twist_axis is None:
-        raise C.ConfigError("sweep.sampler", "continuation", "a sweep with a twist density axis")
+        raise C.ConfigError("sweep.sampler", sweep.sampler, "a sweep with a twist density axis")
+    if sweep.sampler == "paths":
+        _check_paths_scene(scene, checked)
     groups: dict[tuple, list] = {}
     for rid, point, cfg in checked:
         key = tuple(sorted((k, v) for k, v in point.items() if k != twist_axis))
         groups.setdefault(key, []).append((rid, point, cfg))
     jobs = []
-    for members in groups.values():
+    for index, members in enumerate(groups.values()):
         members.sort(key=lambda m: m[1][twist_axis])
+        targets = [C.twist_turns(m[2]) for m in members]
+        column = None
+        if sweep.sampler == "paths":
+            from .paths import Column
+
+            column = Column(index, [m[2] for m in members], targets)
         jobs.append(Job([m[0] for m in members], [m[1] for m in members], members[0][2],
-                        twist_targets=[C.twist_turns(m[2]) for m in members], builder=builder))
+                        twist_targets=targets, column=column, builder=builder))
     return jobs
+
+
+def _check_paths_scene(scene, checked) -> None:
+    """Refuse, before anything runs, a scene the paths sampler cannot follow: a path is the
+    straight start's branch (loading.quasi_static_below > 0, and what the straight start
+    needs), then twist at fixed load (scene twist_under_load)."""
+    from .scenes import check_straight_start
+
+    if scene.scene != "twist_under_load":
+        raise C.ConfigError("scene", scene.scene, "twist_under_load with sweep.sampler: paths "
+                            "(a path is twist at a fixed load)")
+    for _, point, cfg in checked:
+        if cfg.loading.quasi_static_below <= 0:
+            raise C.ConfigError("loading.quasi_static_below", cfg.loading.quasi_static_below,
+                                "> 0 with sweep.sampler: paths (a path starts on the straight "
+                                "branch below its static onset)")
+        check_straight_start(cfg)
 
 
 def _registered_builder(name: str) -> Callable | None:
@@ -362,7 +424,7 @@ def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo,
         report.total += total
         report.skipped += skipped
         shared = (f" in {len(todo)} continuation run(s)" if sweep.sampler == "continuation"
-                  else "")
+                  else f" along {len(todo)} path(s)" if sweep.sampler == "paths" else "")
         echo(f"Launching {total - skipped} of {total} runs{shared} {pool.where} with "
              f"{pool.workers} worker(s)" + (f"; {skipped} already in {out_path}" if skipped else ""))
         _run_jobs(store, longest_first(todo), pool, progress, report)

@@ -14,26 +14,14 @@ boundary the k samples imply. Prints a Markdown table.
 
 import sys
 
-import numpy as np
 import pandas as pd
-from scipy.spatial import cKDTree
+
+from rodphase.studytools import boundary_error
 
 
 def axes_of(table: pd.DataFrame) -> list[str]:
     columns = list(table.columns)
     return columns[columns.index("run_id") + 1:columns.index("status")]
-
-
-def scaled(table: pd.DataFrame, axes, lo: np.ndarray, span: np.ndarray) -> np.ndarray:
-    return (table[axes].to_numpy(float) - lo) / span
-
-
-def error(reference: pd.DataFrame, samples: pd.DataFrame, axes, lo, span) -> float:
-    usable = samples[samples["phase"] != "failed"]
-    tree = cKDTree(scaled(usable, axes, lo, span))
-    _, nearest = tree.query(scaled(reference, axes, lo, span))
-    guessed = usable["phase"].to_numpy()[nearest]
-    return float(np.mean(guessed != reference["phase"].to_numpy()))
 
 
 def main(reference_csv, random_csv, adaptive_csv) -> None:
@@ -51,7 +39,7 @@ def main(reference_csv, random_csv, adaptive_csv) -> None:
     print("| runs | random: boundary error | adaptive: boundary error |")
     print("|---|---|---|")
     def cell(table, k):
-        return f"{error(reference, table.head(k), axes, lo, span):.3f}" if k <= len(table) else ""
+        return f"{boundary_error(reference, table.head(k), axes, lo, span):.3f}" if k <= len(table) else ""
 
     for k in range(10, max(len(random), len(adaptive)) + 1, 10):
         print(f"| {k} | {cell(random, k)} | {cell(adaptive, k)} |")

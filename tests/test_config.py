@@ -449,6 +449,7 @@ SHIPPED_HASHES = {
     "fig3_paper.yaml": "8f555c9a19626097",
     "fig3_paper_adaptive.yaml": "93b6a9d29c903704",
     "fig3_paper_reference.yaml": "d9ec290df1ccc600",
+    "fig3_paths.yaml": "aed118e99fa044dd",
     "fig3_stretched.yaml": "faee3de5054a9d8d",
     "hat_forces.yaml": "65ce94d00c6e86e8",
     "quick.yaml": "0eefb4140349af18",

@@ -1,0 +1,118 @@
+#!/usr/bin/env python
+"""Fig 3 by two methods, cost against precision: the independent sweep (configs/fig3_paper.yaml,
+200 Sobol points, each its own run) and the paths sampler (configs/fig3_paths.yaml, 20 loads ×
+10 twists, one path per load: rodphase/paths.py).
+
+    python benchmarks/map_methods.py reference [--samples 60]   # the fine reference, --jobs 2
+    python benchmarks/map_methods.py compare [--rounds 2]       # the two maps, interleaved
+
+`reference` runs random points that are in neither map (the Sobol sequence of another seed,
+4242) with the paper's protocol step by step (from rest: loading.quasi_static_below = 0), at
+n = 140 (refined to 160 where a guard asks), safety 0.25 and half the twist rate (0.25
+turns/s): finer, slower and independent of both methods' shortcuts.
+
+`compare` runs the two maps one after the other, `--rounds` times, each into a fresh store
+(numba's cache warm), and measures for each: wall time, CPU time (user + system of the sweep
+and its workers), labels, failed runs, and the boundary error against the reference: the
+share of reference points whose label the map's nearest point (in the box scaled to [0, 1]²)
+gets wrong (studytools.boundary_error). Writes out/perf/map_methods.json and, with --write,
+the block "map_methods" of docs/performance.md. The machine and its load are printed with it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rodphase.studytools import boundary_error, machine, sweep_table, timed_sweep, write_block
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "out" / "perf"
+METHODS = {"independent": "configs/fig3_paper.yaml", "paths": "configs/fig3_paths.yaml"}
+REFERENCE_SET = ["sweep.seed=4242", "rod.elements=140", "solver.safety=0.25",
+                 "loading.quasi_static_below=0", "loading.twist_rate=0.25"]
+AXES = ("twist_density", "extension")
+BOX = (np.array([0.0, 1.0]), np.array([2.6, 0.3]))  # Fig 3's box: lo, span of (Φa, L/L0)
+
+
+def reference(samples: int, jobs: int) -> None:
+    store = OUT / "map_reference.h5"
+    wall, cpu = timed_sweep("configs/fig3_paper.yaml", store,
+                            REFERENCE_SET + [f"sweep.samples={samples}"], jobs)
+    table = sweep_table(store)
+    info = {"wall": wall, "cpu": cpu, "samples": samples, "sets": REFERENCE_SET,
+            "phases": table["phase"].value_counts().to_dict(), "machine": machine()}
+    (OUT / "map_reference.json").write_text(json.dumps(info, indent=1))
+    print(json.dumps(info, indent=1))
+
+
+def compare(rounds: int, jobs: int, write: bool) -> None:
+    ref = sweep_table(OUT / "map_reference.h5")
+    ref = ref[ref["phase"] != "failed"]
+    rows = []
+    before = machine()
+    for r in range(rounds):
+        for name, config in METHODS.items():
+            store = OUT / f"map_{name}_{r}.h5"
+            store.unlink(missing_ok=True)
+            wall, cpu = timed_sweep(config, store, [], jobs)
+            table = sweep_table(store)
+            row = {"method": name, "round": r, "wall": wall, "cpu": cpu,
+                   "failed": int((table["phase"] == "failed").sum()),
+                   "phases": table["phase"].value_counts().to_dict(),
+                   "error": boundary_error(ref, table, AXES, *BOX)}
+            rows.append(row)
+            print(row, flush=True)
+    after = machine()
+    (OUT / "map_methods.json").write_text(json.dumps(
+        {"rows": rows, "machine_before": before, "machine_after": after,
+         "reference": len(ref)}, indent=1))
+    frame = pd.DataFrame(rows)
+    lines = [f"Measured {machine_line(before, after)}; reference: {len(ref)} points "
+             "(out/perf/map_reference.json).", "",
+             "| method | round | wall [s] | CPU [s] | failed | boundary error | phases |",
+             "|---|---|---|---|---|---|---|"]
+    for row in rows:
+        phases = ", ".join(f"{k} {v}" for k, v in sorted(row["phases"].items()))
+        lines.append(f"| {row['method']} | {row['round']} | {row['wall']:.1f} | "
+                     f"{row['cpu']:.1f} | {row['failed']} | {row['error']:.3f} | {phases} |")
+    mean = frame.groupby("method")[["wall", "cpu", "error"]].mean()
+    ratio = mean.loc["independent"] / mean.loc["paths"]
+    lines += ["", f"Independent / paths, mean over the rounds: wall {ratio['wall']:.2f}, "
+              f"CPU {ratio['cpu']:.2f}; boundary error {mean.loc['independent', 'error']:.3f} "
+              f"(independent) against {mean.loc['paths', 'error']:.3f} (paths)."]
+    text = "\n".join(lines)
+    print(text)
+    if write:
+        write_block(ROOT / "docs" / "performance.md", "map_methods", text)
+
+
+def machine_line(before: dict, after: dict) -> str:
+    load = lambda m: " ".join(f"{x:.2f}" for x in m["load"])  # noqa: E731
+    return (f"on {before['cpu']}, {before['nproc']} cores, load {load(before)} before and "
+            f"{load(after)} after")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("step", choices=["reference", "compare"])
+    parser.add_argument("--samples", type=int, default=60, help="reference: points")
+    parser.add_argument("--rounds", type=int, default=2, help="compare: rounds")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--write", action="store_true", help="compare: update docs/performance.md")
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    os.chdir(ROOT)
+    if args.step == "reference":
+        reference(args.samples, args.jobs)
+    else:
+        compare(args.rounds, args.jobs, args.write)
+
+
+if __name__ == "__main__":
+    main()
