@@ -34,6 +34,7 @@ rank in the column, θ_c, how it was reached, and the elements of the run it cam
 from __future__ import annotations
 
 import dataclasses
+import time
 
 from . import config as C
 from .result import RunResult
@@ -104,12 +105,16 @@ def run_column(column: Column) -> list[RunResult]:
 
     first = column.scenes[0]
     fraction = first.loading.quasi_static_below
+    started = time.process_time()
     try:
         onset = onset_of(first)
     except ValueError:
         # the straight rod cannot answer for its onset at this resolution (or is unstable
         # untwisted): each sample runs alone, where the straight start says why if it must
         onset = float("nan")
+    # the static part's cost (the bisection on the Cholesky test): a path's cost splits into
+    # this and the dynamic runs' wall times
+    onset_seconds = time.process_time() - started
     m = len(column.targets)
     results: list[RunResult | None] = [None] * m
     on_path = [i for i in range(m)
@@ -120,7 +125,7 @@ def run_column(column: Column) -> list[RunResult]:
     if onset != onset:  # NaN
         for i in on_path:
             results[i] = _tagged(run_scene(column.scenes[i]), column, i, onset, REACHED_ALONE)
-        return results
+        return _with_onset_cost(results, onset_seconds)
     incompressible = first.material.incompressible
     elements, most = first.rod.elements, max(first.rod.elements, first.solver.refine_up_to)
     rest = on_path
@@ -153,4 +158,11 @@ def run_column(column: Column) -> list[RunResult]:
         results[stuck] = _tagged(alone, column, stuck, onset, REACHED_FALLBACK, carried=lost)
         lost = 0.0
         rest = rest[done + 1:]
+    return _with_onset_cost(results, onset_seconds)
+
+
+def _with_onset_cost(results: list[RunResult], seconds: float) -> list[RunResult]:
+    """Every sample of the column records the CPU seconds its onset took (once per column)."""
+    for result in results:
+        result.diagnostics["path"]["onset_cpu_seconds"] = seconds
     return results

@@ -218,7 +218,14 @@ GUARDS = {
                        "element", "The twist is put in faster than it spreads along the rod: "
                        "lower loading.twist_rate (turns/s)."),
     S_SHEAR: Guard("shear", "element sheared by more than 45° (its frame's d3 that far off "
-                   "its tangent)", "element", _STEP_ADVICE + " Or use more rod.elements."),
+                   "its tangent)", "element",
+                   # Fig 3's runaways at Φa >= 2.49 are the rod's shear under the torque, at
+                   # any resolution, step or twist rate (docs/reproduction.md, "The triple
+                   # point's failures"): the step advice alone sent users the wrong way
+                   "If the torque here shears the rod this far at any step (a shear runaway "
+                   "of the Cosserat model), only a stiffer shear removes it: "
+                   "material.shear_stiffness (N, 4GA/3) or material.shear_modulus. If not, "
+                   "use more rod.elements. " + _STEP_ADVICE),
 }
 
 # What advance reports besides the history, one row each (name, meaning); info[D_*] slots
