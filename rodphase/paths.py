@@ -36,9 +36,12 @@ from __future__ import annotations
 import dataclasses
 import time
 
+import numpy as np
+
 from . import config as C
-from .result import RunResult
+from .result import RunResult, rotation_put_in
 from .runner import REFINABLE_GUARDS, run_scene
+from .units import TURN
 
 # how a sample of a path was computed (diagnostics["path"]["reached"])
 REACHED_ALONE = "own run, on the straight branch"
@@ -75,6 +78,24 @@ def reached_samples(result: RunResult) -> int:
     return len(done)
 
 
+# |Wr| [turns] past which a path has left the straight branch: a straight rod writhes by
+# < 1e-3 turns (its frozen round-off), a loop by about one
+JUMP_WRITHE = 0.1
+
+
+def jump_turns(run: RunResult) -> float | None:
+    """The twist [turns put in] at which a path run left the straight branch: its first
+    history row writhing by more than JUMP_WRITHE (None: it never did). Against θ_c this is
+    the protocol's overshoot of the static onset at its twist rate."""
+    writhe = run.history.get("writhe")
+    if writhe is None or not len(writhe):
+        return None
+    left = np.flatnonzero(np.abs(writhe) > JUMP_WRITHE)
+    if not len(left):
+        return None
+    return float(rotation_put_in(run.history)[left[0]] / TURN)
+
+
 def _with(cfg, **values):
     from .scenes import SCENES
 
@@ -82,13 +103,16 @@ def _with(cfg, **values):
 
 
 def _tagged(result: RunResult, column: Column, rank: int, onset: float, reached: str,
-            share: int = 1, carried: float = 0.0) -> RunResult:
+            share: int = 1, carried: float = 0.0, jump: float | None = None) -> RunResult:
     """The result with its place on the path in its diagnostics. The store's wall times add
     up to the work: a path run's wall time is shared by its `share` samples, and the wall
-    time of path runs that finished no sample (`carried`, s) goes to the next sample."""
+    time of path runs that finished no sample (`carried`, s) goes to the next sample. `jump`
+    [turns]: where the path run the sample came from left the straight branch (the same
+    for all its samples; one below it is still straight)."""
     diagnostics = dict(result.diagnostics)
     diagnostics["path"] = {"column": column.index, "rank": rank, "onset_turns": onset,
-                           "reached": reached, "elements": diagnostics.get("elements")}
+                           "reached": reached, "elements": diagnostics.get("elements"),
+                           "jump_turns": jump}
     wall = diagnostics.get("wall_time", 0.0)
     if share > 1:
         diagnostics["path"]["run_wall_time"] = wall
@@ -135,6 +159,7 @@ def run_column(column: Column) -> list[RunResult]:
         cfg = _with(first, **{"rod.elements": elements, "solver.refine_up_to": elements})
         run = run_scene(cfg, twist_targets=[column.targets[i] for i in rest])
         done = reached_samples(run)
+        jump = jump_turns(run)
         if done == 0:
             lost += run.diagnostics.get("wall_time", 0.0)
         for j in range(done):
@@ -142,7 +167,7 @@ def run_column(column: Column) -> list[RunResult]:
             if run.status == "unstable":  # the guard stopped the run after this sample
                 sample.diagnostics["guard"] = None
             results[rest[j]] = _tagged(sample, column, rest[j], onset, REACHED_PATH,
-                                       share=done, carried=lost if j == 0 else 0.0)
+                                       share=done, carried=lost if j == 0 else 0.0, jump=jump)
         lost = 0.0 if done else lost
         if done == len(rest):
             break

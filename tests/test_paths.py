@@ -118,6 +118,11 @@ def test_a_path_agrees_with_the_static_onset_on_both_sides():
     for r, turns in zip(results, column.targets):
         assert r.history["link_escapes"][-1] == 0
         assert float(r.history["link"][-1]) == pytest.approx(turns, abs=0.05)
+    # the path left the straight branch past the static onset (the dynamic overshoot at
+    # 1 turn/s) and before the first buckled sample
+    jump = tags[1]["jump_turns"]
+    assert onset < jump <= column.targets[2]
+    assert all(t["jump_turns"] == jump for t in tags[1:]) and tags[0]["jump_turns"] is None
     # the path's one run is shared: its wall time split evenly among its three samples
     shared = [r.diagnostics["wall_time"] for r in results[1:]]
     assert shared[0] == pytest.approx(tags[1]["run_wall_time"] / 3)
