@@ -69,13 +69,10 @@ def onset_of(cfg) -> float:
 
 
 def reached_samples(result: RunResult) -> int:
-    """How many samples of a continuation run finished their hold (converged or not): a
-    hold the run stopped in (a guard) is not finished."""
-    stages = result.diagnostics.get("stages", [])
-    done = [i for i, st in enumerate(stages) if st.get("sample") is not None]
-    if result.status == "unstable" and done and done[-1] == len(stages) - 1:
-        done = done[:-1]
-    return len(done)
+    """How many samples of a continuation run finished their hold (sweep.finished_holds)."""
+    from .sweep import finished_holds
+
+    return len(finished_holds(result))
 
 
 # |Wr| [turns] past which a path has left the straight branch: a straight rod writhes by
@@ -141,18 +138,13 @@ def run_column(column: Column) -> list[RunResult]:
     onset_seconds = time.process_time() - started
     m = len(column.targets)
     results: list[RunResult | None] = [None] * m
-    on_path = [i for i in range(m)
-               if not abs(column.targets[i]) < fraction * onset]  # NaN: all on the path
+    # the samples from fraction·θ_c on make the path; without θ_c (NaN) none does
+    rest = [i for i in range(m) if abs(column.targets[i]) >= fraction * onset]
     for i in range(m):
-        if i not in on_path:
+        if i not in rest:
             results[i] = _tagged(run_scene(column.scenes[i]), column, i, onset, REACHED_ALONE)
-    if onset != onset:  # NaN
-        for i in on_path:
-            results[i] = _tagged(run_scene(column.scenes[i]), column, i, onset, REACHED_ALONE)
-        return _with_onset_cost(results, onset_seconds)
     incompressible = first.material.incompressible
     elements, most = first.rod.elements, max(first.rod.elements, first.solver.refine_up_to)
-    rest = on_path
     lost = 0.0  # s, the wall time of path runs that finished no sample
     while rest:
         # refinement is this loop's: the run itself must not redo the column from the start

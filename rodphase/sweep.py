@@ -213,15 +213,25 @@ def execute_batch(jobs: list[Job], config_hash: str | None = None) -> list[tuple
     return outcomes
 
 
+def finished_holds(result: RunResult) -> list[int]:
+    """The stage index of each sample's hold that a continuation run finished (converged or
+    not), in sample order: a hold a guard stopped the run in was not finished, and its
+    sample not reached."""
+    stages = result.diagnostics.get("stages", [])
+    holds = [i for i, st in enumerate(stages) if st.get("sample") is not None]
+    if result.status == "unstable" and holds and holds[-1] == len(stages) - 1:
+        holds.pop()
+    return holds
+
+
 def split_continuation(result: RunResult, k: int, incompressible: bool = True) -> RunResult:
     """The k-th sample of a continuation run: the state where its hold ended, the history up
     to there, and the status of that hold (or of the run, if it stopped before)."""
     from dataclasses import replace
 
     stages = result.diagnostics.get("stages", [])
-    index = next((i for i, st in enumerate(stages) if st.get("sample") == k), None)
-    if index is not None and result.status == "unstable" and index == len(stages) - 1:
-        index = None  # a guard stopped the run in this hold: the sample was not reached
+    holds = finished_holds(result)
+    index = holds[k] if k < len(holds) else None
     if index is None:
         return replace(result, status=result.status if result.status != "ok" else "error",
                        message=f"the continuation stopped before sample {k}: {result.message}",
