@@ -5,7 +5,7 @@ rodphase.api);
 from the shell: the `rodphase` command.
 """
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 _API = ("classify_file", "histories", "load", "load_sweep", "open", "run", "run_sweep", "table")
 __all__ = ["__version__", *_API]

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import click
 
-from . import __version__
 from . import config as C
+from ._version import __version__
 
 FORCE_HELP = ("Replace OUTPUT if it holds another config's results (it is replaced when the "
               "first new run is stored, not before). With the same config it changes nothing: "

@@ -40,7 +40,7 @@ import numpy as np
 
 from . import config as C
 from .result import RunResult, rotation_put_in
-from .runner import REFINABLE_GUARDS, run_scene
+from .runner import REFINABLE_GUARDS, finished_holds, run_scene, split_continuation
 from .units import TURN
 
 # how a sample of a path was computed (diagnostics["path"]["reached"])
@@ -69,9 +69,7 @@ def onset_of(cfg) -> float:
 
 
 def reached_samples(result: RunResult) -> int:
-    """How many samples of a continuation run finished their hold (sweep.finished_holds)."""
-    from .sweep import finished_holds
-
+    """How many samples of a continuation run finished their hold (runner.finished_holds)."""
     return len(finished_holds(result))
 
 
@@ -122,8 +120,6 @@ def _tagged(result: RunResult, column: Column, rank: int, onset: float, reached:
 
 def run_column(column: Column) -> list[RunResult]:
     """Every sample of the column, in the order of column.targets (see the module doc)."""
-    from .sweep import split_continuation
-
     first = column.scenes[0]
     fraction = first.loading.quasi_static_below
     started = time.process_time()

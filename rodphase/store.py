@@ -921,7 +921,7 @@ def provenance() -> dict:
     import numba
     import scipy
 
-    from . import __version__
+    from ._version import __version__
 
     commit = "unknown (not a git checkout)"
     source = Path(__file__).resolve().parent.parent

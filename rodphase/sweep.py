@@ -24,11 +24,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import __version__
 from . import config as C
+from ._version import __version__
 from .result import RunResult
-from .rod.simulate import current_radii
-from .runner import compile_kernel, cpu_seconds, keep_snapshots, run_scene, snapshot_policy
+from .runner import (
+    compile_kernel,
+    cpu_seconds,
+    keep_snapshots,
+    run_scene,
+    snapshot_policy,
+    split_continuation,
+)
 
 log = logging.getLogger(__name__)
 
@@ -211,54 +217,6 @@ def execute_batch(jobs: list[Job], config_hash: str | None = None) -> list[tuple
                     log.debug("building %s in the worker failed", run_id, exc_info=True)
             outcomes.append((run_id, params, result, error))
     return outcomes
-
-
-def finished_holds(result: RunResult) -> list[int]:
-    """The stage index of each sample's hold that a continuation run finished (converged or
-    not), in sample order: a hold a guard stopped the run in was not finished, and its
-    sample not reached."""
-    stages = result.diagnostics.get("stages", [])
-    holds = [i for i, st in enumerate(stages) if st.get("sample") is not None]
-    if result.status == "unstable" and holds and holds[-1] == len(stages) - 1:
-        holds.pop()
-    return holds
-
-
-def split_continuation(result: RunResult, k: int, incompressible: bool = True) -> RunResult:
-    """The k-th sample of a continuation run: the state where its hold ended, the history up
-    to there, and the status of that hold (or of the run, if it stopped before)."""
-    from dataclasses import replace
-
-    stages = result.diagnostics.get("stages", [])
-    holds = finished_holds(result)
-    index = holds[k] if k < len(holds) else None
-    if index is None:
-        return replace(result, status=result.status if result.status != "ok" else "error",
-                       message=f"the continuation stopped before sample {k}: {result.message}",
-                       history={key: v[:0] for key, v in result.history.items()},
-                       snapshot_positions=result.snapshot_positions[:0],
-                       snapshot_d1=result.snapshot_d1[:0], stage_states=[])
-    row = result.stage_ends[index] + 1
-    positions, directors = result.stage_states[index]
-    hold = stages[index]
-    lengths = np.linalg.norm(np.diff(positions, axis=0), axis=1)
-    radius_factor = float(result.history["radius_factor"][row - 1]) if row > 0 else 1.0
-    status = "ok" if hold["equilibrium"] else "not_converged"
-    message = ("completed" if status == "ok" else
-               f"hold {k} did not reach equilibrium (residual {hold['residual']:.2g})")
-    diagnostics = dict(result.diagnostics, continuation_sample=k,
-                       final_time=hold["end_time"])
-    return replace(result, status=status, message=message, positions=positions,
-                   directors=directors,
-                   radii=current_radii(result.diagnostics["rest_radius"], incompressible,
-                                       result.rest_lengths, lengths, radius_factor),
-                   history={key: v[:row] for key, v in result.history.items()},
-                   snapshot_positions=result.snapshot_positions[:row],
-                   snapshot_d1=result.snapshot_d1[:row], diagnostics=diagnostics,
-                   stage_ends=result.stage_ends[:index + 1], stage_states=[],
-                   # the velocities at the hold's end are not kept (a hold ends near rest):
-                   # the run's final ones would belong to a later sample
-                   velocities=None, angular_velocities=None)
 
 
 def error_result(scene_plain: dict, message: str) -> RunResult:

@@ -13,8 +13,9 @@ from rodphase import config as C
 from rodphase import paths
 from rodphase.cli import main
 from rodphase.result import RunResult
+from rodphase.runner import split_continuation
 from rodphase.scenes import SCENES
-from rodphase.sweep import plan, sample_points, split_continuation
+from rodphase.sweep import plan, sample_points
 
 
 def sweep_file(tmp_path, **sweep):
@@ -170,7 +171,7 @@ def test_a_stopped_path_refines_then_falls_back_to_the_samples_own_run(monkeypat
                                    status="ok")
 
     monkeypatch.setattr(paths, "run_scene", fake_run_scene)
-    monkeypatch.setattr("rodphase.sweep.split_continuation", fake_split)
+    monkeypatch.setattr(paths, "split_continuation", fake_split)
     monkeypatch.setattr(paths, "onset_of", lambda cfg: 1.0)
     column, _ = _column([1.0] * 5, [("solver.refine_up_to", 64)])
     column.targets = [1.0, 1.1, 1.2, 1.3, 1.4]
