@@ -1,4 +1,4 @@
-"""The package's shape, checked from its own source: the layers of docs/architecture.md, no
+"""The package's shape, checked from its own source: the layers of the README ("Layout"), no
 import that points back up (which also rules out every import cycle), and no function too
 long to read as one page.
 
