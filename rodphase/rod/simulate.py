@@ -363,15 +363,67 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
     window (the stage report says `settled`); if it never gets there the run's status is
     `not_converged`. A guard (non-finite state, runaway velocity, penetration) stops the
     run with status `unstable` and a message saying when, where, and what to change.
+
+    The run is: checks that refuse it before any step (_refusal), then each stage prepared
+    (_StagePlan), run by one or more kernel calls (_run_stage), recorded (_Record) and judged
+    (_verdict), and the record collected into the result (_collect).
     """
-    rod = problem.rod
-    n = rod.elements
     dt, bound = time_step(problem)
     notes: list[str] = []
+    refused = _refusal(problem, dt, bound, notes)
+    if refused is not None:
+        return refused
+    clock = _Clock.of(problem, dt, bound, resume)
+    arrays = _rod_arrays(problem)
+    state: RodState = problem.state.copy()
+    n = problem.rod.elements
+    initial_end = state.x[:, n].copy() if resume is None else np.asarray(resume.initial_end, float)
+    frames = clamp_reference(problem)
+    record = _Record(notes=notes)
+    verdict = ("ok", "completed", None)
+    wall0 = time.perf_counter()
+    budget = max_steps if max_steps is not None else np.iinfo(np.int64).max
+    held = None  # the held anchors (nodes 0 and n) of the last stage, on the run clock
+    for index, stage in enumerate(problem.stages):
+        if resume is not None and index < resume.stage:
+            continue
+        plan = _StagePlan.of(problem, stage, index, state, resume, held)
+        held = plan.start_position, plan.end_position
+        n_steps = int(math.ceil(plan.left / clock.step()[0] - 1e-9))
+        if n_steps <= 0:
+            # a stage of zero length (e.g. no load ramp) has nothing to do; it keeps its place
+            # in the report so that stage indices and labels stay aligned
+            nothing = np.zeros(k.N_INFO)
+            nothing[[k.D_RESIDUAL, k.D_SETTLE_MOTION]] = np.nan
+            record.end_stage(state, _stage_entry(stage, plan.label, 0, state.time,
+                                                 k.S_COMPLETED, nothing))
+            continue
+        n_steps = min(n_steps, budget - record.steps)
+        if n_steps <= 0:
+            break
+        outcome = _run_stage(problem, plan, state, clock, record, arrays, n_steps, budget,
+                             initial_end, frames)
+        record.end_stage(state, _stage_entry(stage, plan.label, outcome.steps, state.time,
+                                             outcome.code, outcome.info))
+        if outcome.static_tests:
+            record.stage_report[-1].update(static_tests=outcome.static_tests,
+                                           static_unstable=outcome.static_unstable)
+        verdict, stop = _verdict(problem, plan, outcome, clock, state, verdict,
+                                 record.steps >= budget, budget)
+        if stop:
+            break
+    return _collect(problem, state, record, arrays, frames, clock, verdict,
+                    time.perf_counter() - wall0)
+
+
+def _refusal(problem: Problem, dt: float, bound: float, notes: list[str]) -> RunResult | None:
+    """The refused result of a run that must not start (a step that would blow up unseen,
+    snapshots that would not fit), else None; a risky user step is noted and warned of."""
+    n = problem.rod.elements
     if problem.solver.dt is not None and dt > bound:
         note = (f"solver.dt = {dt:.3g} s is above the stable bound {bound:.3g} s for "
                 f"{n} elements; the run will likely go unstable")
-        warnings.warn(note, stacklevel=2)
+        warnings.warn(note, stacklevel=3)
         notes.append(note)
         if problem.solver.quadratic_drag > 0.0:
             # The speed-dependent drag caps speeds near 1/(drag·dt): an explicit instability
@@ -390,33 +442,99 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
             f"{rows:.3g} snapshots ({snapshot_bytes / 1e9:.3g} GB) for this protocol; allowed: "
             f"at most {SNAPSHOT_LIMIT / 1e9:g} GB, i.e. history_interval >= "
             f"{problem.solver.history_interval * snapshot_bytes / SNAPSHOT_LIMIT:.3g} s"))
-    # Sleeping contact (Contact.sleep): until the rod first touches itself the run takes the
-    # step of a rod without contact (1.6x longer for the paper's rod at 80 elements); from
-    # the step of that touch on, the step with contact. A user's dt is both.
-    sleeps = problem.contact.enabled and problem.contact.sleep
-    asleep = sleeps and not (resume is not None and resume.contact_awake)
-    dt_asleep, bound_asleep = time_step(problem, asleep=True) if sleeps else (dt, bound)
-    woke_at = None
-    arrays = _rod_arrays(problem)
-    state: RodState = problem.state.copy()
-    initial_end = state.x[:, n].copy() if resume is None else np.asarray(resume.initial_end, float)
-    start_frame, end_frame = clamp_reference(problem)
+    return None
 
-    rows_h, rows_x, rows_d, stage_ids, stage_ends, stage_states = [], [], [], [], [], []
-    info = np.zeros(k.N_INFO)
-    status, message = "ok", "completed"
-    guard = None
-    steps_total = 0
-    rebuilds = 0
-    near_rebuilds = 0
-    max_pairs = 0
-    max_pen = 0.0
-    stage_report = []
-    wall0 = time.perf_counter()
-    budget = max_steps if max_steps is not None else np.iinfo(np.int64).max
-    for index, stage in enumerate(problem.stages):
-        if resume is not None and index < resume.stage:
-            continue
+
+@dataclasses.dataclass
+class _Clock:
+    """The run's time step. Sleeping contact (Contact.sleep): until the rod first touches
+    itself the run takes the step of a rod without contact (1.6x longer for the paper's rod
+    at 80 elements); from the step of that touch on, the step with contact. A user's dt is
+    both."""
+
+    dt: float
+    bound: float
+    sleeps: bool
+    asleep: bool
+    dt_asleep: float
+    bound_asleep: float
+    woke_at: float | None = None
+
+    @classmethod
+    def of(cls, problem: Problem, dt: float, bound: float, resume: Resume | None) -> _Clock:
+        sleeps = problem.contact.enabled and problem.contact.sleep
+        asleep = sleeps and not (resume is not None and resume.contact_awake)
+        dt_asleep, bound_asleep = time_step(problem, asleep=True) if sleeps else (dt, bound)
+        return cls(dt, bound, sleeps, asleep, dt_asleep, bound_asleep)
+
+    def step(self) -> tuple[float, float]:
+        """(dt, its stable bound) [s] now."""
+        return (self.dt_asleep, self.bound_asleep) if self.asleep else (self.dt, self.bound)
+
+    def wake(self, t: float) -> None:
+        self.asleep = False
+        self.woke_at = t
+
+
+@dataclasses.dataclass
+class _Record:
+    """What the run has gathered so far: the kernel's history rows and snapshots per call,
+    the stage ends, states and reports, the contact list's counters and the notes."""
+
+    notes: list[str]
+    rows_h: list = dataclasses.field(default_factory=list)
+    rows_x: list = dataclasses.field(default_factory=list)
+    rows_d: list = dataclasses.field(default_factory=list)
+    stage_ids: list = dataclasses.field(default_factory=list)
+    stage_ends: list = dataclasses.field(default_factory=list)
+    stage_states: list = dataclasses.field(default_factory=list)
+    stage_report: list = dataclasses.field(default_factory=list)
+    steps: int = 0
+    rebuilds: int = 0
+    near_rebuilds: int = 0
+    max_pairs: int = 0
+    max_penetration: float = 0.0
+
+    def add_call(self, steps: int, info: np.ndarray, hist, snap_x, snap_d, rows: int,
+                 index: int) -> None:
+        """One kernel call's rows (of stage `index`) and counters."""
+        self.steps += steps
+        self.rebuilds += int(info[k.D_REBUILDS])
+        self.near_rebuilds += int(info[k.D_NEAR_REBUILDS])
+        self.max_pairs = max(self.max_pairs, int(info[k.D_MAX_PAIRS]))
+        self.max_penetration = max(self.max_penetration, float(info[k.D_MAX_PENETRATION]))
+        self.rows_h.append(hist[:rows])
+        self.rows_x.append(snap_x[:rows])
+        self.rows_d.append(snap_d[:rows])
+        self.stage_ids.append(np.full(rows, index))
+
+    def end_stage(self, state: RodState, report: dict) -> None:
+        self.stage_ends.append(sum(len(r) for r in self.rows_h) - 1)
+        self.stage_states.append((state.positions, state.directors))
+        self.stage_report.append(report)
+
+
+@dataclasses.dataclass
+class _StagePlan:
+    """One stage as the kernel runs it: its controls and their clock, its ends and held
+    anchors, and the time left in it."""
+
+    stage: object
+    index: int
+    label: str
+    controls: Controls
+    shift: float  # s, the stage clock's zero on the run clock (0 for the run's controls)
+    settled: float  # s, run clock: when every control has reached its last value
+    ends: Ends
+    start_position: np.ndarray
+    end_position: np.ndarray
+    tables: tuple
+    stage_end: float  # s, run clock
+    left: float  # s
+
+    @classmethod
+    def of(cls, problem: Problem, stage, index: int, state: RodState, resume: Resume | None,
+           held) -> _StagePlan:
         resuming = resume is not None and index == resume.stage
         # A stage's own controls run on the stage clock; the problem's on the run clock.
         own = stage.controls is not None
@@ -428,166 +546,188 @@ def simulate(problem: Problem, *, max_steps: int | None = None,
         ends = stage.ends if stage.ends is not None else problem.ends
         # Held components stay where the stage finds them, plus the displacement control,
         # when the stage has its own clock; on the run clock they are held from the start.
+        n = problem.rod.elements
         if resuming:
             start_position = np.array(resume.start_position, dtype=float)
             end_position = np.array(resume.end_position, dtype=float)
         elif own or index == 0:
             start_position = state.x[:, 0].copy()
             end_position = state.x[:, n].copy()
-        table_t, table_v, table_n = _table_arrays(tables, shift)
+        else:
+            start_position, end_position = held
         left = t0 + stage.duration - state.time if resuming else stage.duration
-        n_steps = int(math.ceil(left / (dt_asleep if asleep else dt) - 1e-9))
-        if n_steps <= 0:
-            # a stage of zero length (e.g. no load ramp) has nothing to do; it keeps its place
-            # in the report so that stage indices and labels stay aligned
-            stage_ends.append(sum(len(r) for r in rows_h) - 1)
-            stage_states.append((state.positions, state.directors))
-            nothing = np.zeros(k.N_INFO)
-            nothing[[k.D_RESIDUAL, k.D_SETTLE_MOTION]] = np.nan
-            stage_report.append(_stage_entry(stage, stage.label or f"stage {index}", 0,
-                                             state.time, k.S_COMPLETED, nothing))
-            continue
-        n_steps = min(n_steps, budget - steps_total)
-        if n_steps <= 0:
-            break
-        stage_end = t0 + stage.duration
-        stage_steps = 0
-        first_call = True
-        rod_properties = k.RodProperties(local_mask=_local_mask(n, controls.segment), **arrays)
-        probe = probe_shape(n, ends.axis, problem.solver.probe_seed + index)
-        static_tests, static_unstable = 0, 0
-        while True:
-            # one kernel call, or two if sleeping contact wakes within the stage: the second
-            # goes on from the same time with contact on and its own time step
-            step_dt, step_bound = (dt_asleep, bound_asleep) if asleep else (dt, bound)
-            history_every = max(1, int(round(problem.solver.history_interval / step_dt)))
-            boundary, settings = _kernel_inputs(problem, ends, step_dt, history_every,
-                                                stage.until_equilibrium, settled, controls,
-                                                start_position, end_position, start_frame,
-                                                end_frame, asleep)
-            if not first_call:
-                n_steps = int(math.ceil((stage_end - state.time) / step_dt - 1e-9))
-                n_steps = min(n_steps, budget - steps_total)
-                if n_steps <= 0:  # woke at the stage's very end
-                    code = k.S_COMPLETED
-                    break
-            capacity = n_steps // history_every + 2
-            hist = np.zeros((capacity, k.N_HISTORY))
-            snap_x = np.zeros((capacity, 3, n + 1))
-            snap_d = np.zeros((capacity, 3, n))
-            info = np.zeros(k.N_INFO)
-            arguments = (state.x, state.v, state.Q, state.w, float(state.time), int(n_steps),
-                         rod_properties, boundary, settings,
-                         k.ControlTables(table_t, table_v, table_n), probe,
-                         k.Output(hist, snap_x, snap_d, info))
-            # the law is a specialization of advance (see its docstring): the paper's is called
-            # exactly as before the option existed
-            if rod.law == "paper":
-                code, steps, t_end, rows = k.advance(*arguments)
-            else:
-                code, steps, t_end, rows = k.advance(*arguments, True)
-            state.time = t_end
-            steps_total += steps
-            stage_steps += steps
-            rebuilds += int(info[k.D_REBUILDS])
-            near_rebuilds += int(info[k.D_NEAR_REBUILDS])
-            max_pairs = max(max_pairs, int(info[k.D_MAX_PAIRS]))
-            max_pen = max(max_pen, float(info[k.D_MAX_PENETRATION]))
-            hist[:rows, k.H_END_DISPLACEMENT] += ((end_position - initial_end) @ boundary.axis
-                                                  + problem.end_displacement_offset)
-            rows_h.append(hist[:rows])
-            rows_x.append(snap_x[:rows])
-            rows_d.append(snap_d[:rows])
-            stage_ids.append(np.full(rows, index))
-            if (code == k.S_EQUILIBRIUM and settings.probe and problem.solver.static_stability
-                    and rows and hist[rows - 1, k.H_CONTACTS] == 0):
-                # the kernel's probe passed; the model's own stiffness has the last word
-                static_tests += 1
-                verdict = static.stability(
-                    static_model_of(problem, controls, state.time, ends, shift), state.x,
-                    state.Q)
-                if not verdict.stable and state.time < stage_end:
-                    static_unstable += 1
-                    notes.append(
-                        f"{stage.label or f'stage {index}'}: the equilibrium at t = "
-                        f"{state.time:.4g} s was unstable by the model's stiffness "
-                        f"({verdict.unstable_modes} growing modes, lowest ω² = "
-                        f"{verdict.lowest:.3g} s⁻²); pushed by {settings.probe_size:.3g} m "
-                        "along the most unstable one")
-                    state.x[:], state.Q[:] = static.displaced(
-                        state.x, state.Q, verdict.mode, verdict.mode_rotation,
-                        settings.probe_size)
-                    state.v[:] = 0.0
-                    state.w[:] = 0.0
-                    first_call = False
-                    continue
-            if code != k.S_WAKE:
-                break
-            asleep = False
-            woke_at = t_end
-            first_call = False
-        stage_ends.append(sum(len(r) for r in rows_h) - 1)
-        stage_states.append((state.positions, state.directors))
-        label = stage.label or f"stage {index}"
-        stage_report.append(_stage_entry(stage, label, stage_steps, state.time, code, info))
-        if static_tests:
-            stage_report[-1].update(static_tests=static_tests, static_unstable=static_unstable)
-        if code in k.GUARDS:
-            status = "unstable"
-            guard, guard_words, unit, advice = k.GUARDS[code]
-            where = int(info[k.D_WHERE])
-            if problem.solver.dt is not None and dt > bound:
-                # an explicit step above its bound blows up in whatever guard it meets first
-                # (often the 135° one): name the step, and do not let a sweep refine the rod
-                guard = "time_step"
-                advice = (f"solver.dt = {dt:.3g} s is {dt / bound:.3g} times the stable bound "
-                          f"{bound:.3g} s for {n} elements: use solver.dt: auto or a dt below "
-                          "the bound.")
-            message = (f"unstable in {label} at t = {state.time:.4g} s: {guard_words} at {unit} "
-                       f"{where} (value {info[k.D_VALUE]:.3g}); dt = {step_dt:.3g} s, stable "
-                       f"bound {step_bound:.3g} s. {advice}")
-            break
-        if stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
-            status = "not_converged"
-            message = f"{label} did not reach equilibrium in {stage.duration:g} s: " + \
-                _unmet_criteria(problem.solver, settings, info) + \
-                " Hold longer (solver.hold_max_time) or damp more (solver.damping)."
-        if steps_total >= budget:
-            if status == "ok":
-                status = "not_converged"
-                message = f"stopped after max_steps = {budget} steps in {label}"
-            break
-    wall = time.perf_counter() - wall0
+        return cls(stage, index, stage.label or f"stage {index}", controls, shift, settled,
+                   ends, start_position, end_position, _table_arrays(tables, shift),
+                   t0 + stage.duration, left)
 
-    hist = np.concatenate(rows_h) if rows_h else np.zeros((0, k.N_HISTORY))
+
+@dataclasses.dataclass
+class _Outcome:
+    """How a stage's kernel calls ended: the last call's status code and info, its settings
+    and step, the stage's steps and the static stability tests made."""
+
+    code: int
+    info: np.ndarray
+    settings: object
+    step_dt: float
+    step_bound: float
+    steps: int
+    static_tests: int
+    static_unstable: int
+
+
+def _run_stage(problem: Problem, plan: _StagePlan, state: RodState, clock: _Clock,
+               record: _Record, arrays: dict, n_steps: int, budget: int,
+               initial_end: np.ndarray, frames) -> _Outcome:
+    """Run one stage from `state` (advanced in place): one kernel call, or more when sleeping
+    contact wakes within it (the next call goes on from the same time with contact on and
+    its own step) or when the model's stiffness finds a probed equilibrium unstable (pushed
+    along its growing mode, the hold goes on)."""
+    n = problem.rod.elements
+    stage, index = plan.stage, plan.index
+    start_frame, end_frame = frames
+    stage_steps = 0
+    first_call = True
+    rod_properties = k.RodProperties(local_mask=_local_mask(n, plan.controls.segment), **arrays)
+    probe = probe_shape(n, plan.ends.axis, problem.solver.probe_seed + index)
+    static_tests, static_unstable = 0, 0
+    info = np.zeros(k.N_INFO)
+    while True:
+        step_dt, step_bound = clock.step()
+        history_every = max(1, int(round(problem.solver.history_interval / step_dt)))
+        boundary, settings = _kernel_inputs(problem, plan.ends, step_dt, history_every,
+                                            stage.until_equilibrium, plan.settled,
+                                            plan.controls, plan.start_position,
+                                            plan.end_position, start_frame, end_frame,
+                                            clock.asleep)
+        if not first_call:
+            n_steps = int(math.ceil((plan.stage_end - state.time) / step_dt - 1e-9))
+            n_steps = min(n_steps, budget - record.steps)
+            if n_steps <= 0:  # woke at the stage's very end
+                code = k.S_COMPLETED
+                break
+        capacity = n_steps // history_every + 2
+        hist = np.zeros((capacity, k.N_HISTORY))
+        snap_x = np.zeros((capacity, 3, n + 1))
+        snap_d = np.zeros((capacity, 3, n))
+        info = np.zeros(k.N_INFO)
+        arguments = (state.x, state.v, state.Q, state.w, float(state.time), int(n_steps),
+                     rod_properties, boundary, settings, k.ControlTables(*plan.tables), probe,
+                     k.Output(hist, snap_x, snap_d, info))
+        # the law is a specialization of advance (see its docstring): the paper's is called
+        # exactly as before the option existed
+        if problem.rod.law == "paper":
+            code, steps, t_end, rows = k.advance(*arguments)
+        else:
+            code, steps, t_end, rows = k.advance(*arguments, True)
+        state.time = t_end
+        stage_steps += steps
+        hist[:rows, k.H_END_DISPLACEMENT] += ((plan.end_position - initial_end) @ boundary.axis
+                                              + problem.end_displacement_offset)
+        record.add_call(steps, info, hist, snap_x, snap_d, rows, index)
+        if (code == k.S_EQUILIBRIUM and settings.probe and problem.solver.static_stability
+                and rows and hist[rows - 1, k.H_CONTACTS] == 0):
+            # the kernel's probe passed; the model's own stiffness has the last word
+            static_tests += 1
+            verdict = static.stability(
+                static_model_of(problem, plan.controls, state.time, plan.ends, plan.shift),
+                state.x, state.Q)
+            if not verdict.stable and state.time < plan.stage_end:
+                static_unstable += 1
+                record.notes.append(
+                    f"{plan.label}: the equilibrium at t = {state.time:.4g} s was unstable by "
+                    f"the model's stiffness ({verdict.unstable_modes} growing modes, lowest "
+                    f"ω² = {verdict.lowest:.3g} s⁻²); pushed by {settings.probe_size:.3g} m "
+                    "along the most unstable one")
+                state.x[:], state.Q[:] = static.displaced(
+                    state.x, state.Q, verdict.mode, verdict.mode_rotation, settings.probe_size)
+                state.v[:] = 0.0
+                state.w[:] = 0.0
+                first_call = False
+                continue
+        if code != k.S_WAKE:
+            break
+        clock.wake(t_end)
+        first_call = False
+    return _Outcome(code, info, settings, step_dt, step_bound, stage_steps, static_tests,
+                    static_unstable)
+
+
+def _verdict(problem: Problem, plan: _StagePlan, outcome: _Outcome, clock: _Clock,
+             state: RodState, verdict: tuple, out_of_steps: bool, budget: int):
+    """The run's (status, message, guard) after a stage, and whether the run stops there: a
+    guard stops it as unstable, a hold that did not settle leaves it not converged, and so
+    does the step budget."""
+    status, message, guard = verdict
+    code, info = outcome.code, outcome.info
+    n = problem.rod.elements
+    if code in k.GUARDS:
+        guard, guard_words, unit, advice = k.GUARDS[code]
+        where = int(info[k.D_WHERE])
+        if problem.solver.dt is not None and clock.dt > clock.bound:
+            # an explicit step above its bound blows up in whatever guard it meets first
+            # (often the 135° one): name the step, and do not let a sweep refine the rod
+            guard = "time_step"
+            advice = (f"solver.dt = {clock.dt:.3g} s is {clock.dt / clock.bound:.3g} times the "
+                      f"stable bound {clock.bound:.3g} s for {n} elements: use solver.dt: auto "
+                      "or a dt below the bound.")
+        message = (f"unstable in {plan.label} at t = {state.time:.4g} s: {guard_words} at "
+                   f"{unit} {where} (value {info[k.D_VALUE]:.3g}); dt = {outcome.step_dt:.3g} "
+                   f"s, stable bound {outcome.step_bound:.3g} s. {advice}")
+        return ("unstable", message, guard), True
+    if plan.stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
+        status = "not_converged"
+        message = f"{plan.label} did not reach equilibrium in {plan.stage.duration:g} s: " + \
+            _unmet_criteria(problem.solver, outcome.settings, info) + \
+            " Hold longer (solver.hold_max_time) or damp more (solver.damping)."
+    if out_of_steps:
+        if status == "ok":
+            status = "not_converged"
+            message = f"stopped after max_steps = {budget} steps in {plan.label}"
+        return (status, message, guard), True
+    return (status, message, guard), False
+
+
+def _collect(problem: Problem, state: RodState, record: _Record, arrays: dict, frames,
+             clock: _Clock, verdict: tuple, wall: float) -> RunResult:
+    """The RunResult of a finished (or stopped) run: its record in the public (N, 3) layout,
+    the final state and the diagnostics."""
+    rod = problem.rod
+    n = rod.elements
+    status, message, guard = verdict
+    hist = np.concatenate(record.rows_h) if record.rows_h else np.zeros((0, k.N_HISTORY))
     history = {name: hist[:, col].copy() for col, name in enumerate(HISTORY_COLUMNS)}
-    history["stage"] = np.concatenate(stage_ids) if stage_ids else np.zeros(0, dtype=np.int64)
-    snapshot_positions = (np.transpose(np.concatenate(rows_x), (0, 2, 1)) if rows_x
-                          else np.zeros((0, n + 1, 3)))
-    snapshot_d1 = np.transpose(np.concatenate(rows_d), (0, 2, 1)) if rows_d else np.zeros((0, n, 3))
+    history["stage"] = (np.concatenate(record.stage_ids) if record.stage_ids
+                        else np.zeros(0, dtype=np.int64))
+    snapshot_positions = (np.transpose(np.concatenate(record.rows_x), (0, 2, 1))
+                          if record.rows_x else np.zeros((0, n + 1, 3)))
+    snapshot_d1 = (np.transpose(np.concatenate(record.rows_d), (0, 2, 1)) if record.rows_d
+                   else np.zeros((0, n, 3)))
     lengths = np.linalg.norm(np.diff(state.x, axis=1), axis=0)
     rest = arrays["rest_length"]
     radius_factor = float(hist[-1, k.H_RADIUS_FACTOR]) if len(hist) else 1.0
     radii = current_radii(rod.radius, rod.incompressible, rest, lengths, radius_factor)
     diagnostics = {
-        "dt": dt, "dt_bound": bound, "steps": steps_total, "wall_time": wall,
+        "dt": clock.dt, "dt_bound": clock.bound, "steps": record.steps, "wall_time": wall,
         # sleeping contact: the step before it woke, and when it woke (None: it never did)
-        "dt_asleep": dt_asleep if sleeps else None,
-        "contact_woke_at": woke_at,
-        "us_per_step": 1e6 * wall / max(steps_total, 1), "rebuilds": rebuilds,
-        "near_rebuilds": near_rebuilds, "max_pairs": max_pairs, "max_penetration": max_pen,
-        "final_time": state.time,
+        "dt_asleep": clock.dt_asleep if clock.sleeps else None,
+        "contact_woke_at": clock.woke_at,
+        "us_per_step": 1e6 * wall / max(record.steps, 1), "rebuilds": record.rebuilds,
+        "near_rebuilds": record.near_rebuilds, "max_pairs": record.max_pairs,
+        "max_penetration": record.max_penetration, "final_time": state.time,
         "rest_radius": rod.radius, "rest_length": rod.length, "elements": n,
         "youngs_modulus": rod.youngs_modulus,
-        "force_scale": force_scale(problem), "stages": stage_report, "notes": notes,
-        "guard": guard,
+        "force_scale": force_scale(problem), "stages": record.stage_report,
+        "notes": record.notes, "guard": guard,
     }
     if rod.law != "paper":
         diagnostics["law"] = rod.law  # what tabulate's extension of the applied load needs
+    start_frame, end_frame = frames
     return RunResult(status=status, message=message, positions=state.positions,
                      directors=state.directors, radii=radii, rest_lengths=rest.copy(),
                      history=history, snapshot_positions=snapshot_positions,
-                     snapshot_d1=snapshot_d1, diagnostics=diagnostics, stage_ends=stage_ends,
-                     stage_states=stage_states, velocities=np.ascontiguousarray(state.v.T),
+                     snapshot_d1=snapshot_d1, diagnostics=diagnostics,
+                     stage_ends=record.stage_ends, stage_states=record.stage_states,
+                     velocities=np.ascontiguousarray(state.v.T),
                      angular_velocities=np.ascontiguousarray(state.w.T),
                      clamp_frames=np.stack([start_frame, end_frame]))
