@@ -146,6 +146,13 @@ def interval(minimum: float, maximum: float, unit: str) -> Check:
 
 
 # ---------------------------------------------------------------- scene schema
+# The paper's dimensionless controls are bounded alike wherever they are given, as a scene key
+# (loading.twist_density) or as a sweep axis (sweep.axes.twist_density): one range each.
+# |Φa| = a0·θ/L0 is the twisted rod's surface shear strain; 3 is past any elastic solid and
+# past the paper's box (Φa ≤ 2.6).
+TWIST_DENSITY_RANGE = (-3.0, 3.0)
+EXTENSION_RANGE = (1.0, 2.0)  # L/L0 of the straight loaded rod
+FORCE_MULTIPLE_RANGE = (0.0, 1000.0)  # F / F_C
 # section → key → (check, default). A default of REQUIRED must be given by the user.
 REQUIRED = object()
 positive = number(0.0, strict_min=True)
@@ -249,16 +256,20 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "body_radius": (number(0, 20, strict_min=True, unit="rest radii"), 1.0),
     },
     "loading": {
-        "force_multiple": (number(0, 1000, unit="F_C = pi^2 E I / L0^2", nullable=True), None),
+        "force_multiple": (number(*FORCE_MULTIPLE_RANGE, unit="F_C = pi^2 E I / L0^2",
+                                  nullable=True), None),
         "force": (number(0, unit="N", nullable=True), None),
-        "extension": (number(1.0, 2.0, unit="L/L0 under constant load", nullable=True), None),
+        "extension": (number(*EXTENSION_RANGE, unit="L/L0 under constant load", nullable=True),
+                      None),
         "force_ramp_time": (number(0, unit="s"), 1.0),
         "twist_turns": (number(unit="turns", nullable=True), None),
-        "twist_density": (number(unit="Phi*a, twist per rest length x rest radius",
+        "twist_density": (number(*TWIST_DENSITY_RANGE,
+                                 unit="Phi*a, twist per rest length x rest radius",
                                  nullable=True), None),
-        "twist_density_current": (number(unit="Phi*a with the stretched length L = e L0 and "
-                                          "radius a0/sqrt(e) of the straight loaded rod",
-                                          nullable=True), None),
+        "twist_density_current": (number(*TWIST_DENSITY_RANGE,
+                                         unit="Phi*a with the stretched length L = e L0 and "
+                                         "radius a0/sqrt(e) of the straight loaded rod",
+                                         nullable=True), None),
         "twist_rate": (number(0, strict_min=True, unit="turns/s"), 0.5),
         # twist_under_load: start in the loaded straight rod's equilibrium, twisted up to this
         # fraction of its buckling twist (the model's own onset, rod/onset.py), instead of
@@ -348,8 +359,9 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "first": (number(0, 1, unit="fraction of L0"), 0.4),
         "last": (number(0, 1, unit="fraction of L0"), 0.6),
         "pull_multiple": (number(0, 1000, unit="F_C"), 20.0),
-        "extra_twist_density": (number(unit="Phi*a added over the segment"), 0.0),
-        "at_twist_density": (number(unit="Phi*a when the agent acts"), 0.4),
+        "extra_twist_density": (number(*TWIST_DENSITY_RANGE, unit="Phi*a added over the segment"),
+                                0.0),
+        "at_twist_density": (number(*TWIST_DENSITY_RANGE, unit="Phi*a when the agent acts"), 0.4),
     },
 }
 
@@ -399,11 +411,11 @@ SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
 
 # sweep axes in the paper's dimensionless units and where they go in the scene
 AXES = {
-    "twist_density": (interval(-3.0, 3.0, "Phi*a"), "loading.twist_density"),
-    "twist_density_current": (interval(-3.0, 3.0, "Phi*a of the stretched rod"),
+    "twist_density": (interval(*TWIST_DENSITY_RANGE, "Phi*a"), "loading.twist_density"),
+    "twist_density_current": (interval(*TWIST_DENSITY_RANGE, "Phi*a of the stretched rod"),
                               "loading.twist_density_current"),
-    "extension": (interval(1.0, 2.0, "L/L0"), "loading.extension"),
-    "force_multiple": (interval(0.0, 1000.0, "F_C"), "loading.force_multiple"),
+    "extension": (interval(*EXTENSION_RANGE, "L/L0"), "loading.extension"),
+    "force_multiple": (interval(*FORCE_MULTIPLE_RANGE, "F_C"), "loading.force_multiple"),
 }
 
 

@@ -530,3 +530,24 @@ def test_a_hash_neutral_key_counts_only_when_it_leaves_its_neutral_value(monkeyp
     same = C.load_scene(C.PACKAGE_CONFIGS / "scenes" / "fig2b_solenoid.yaml",
                         [("material.incompressible", False)], SCENES)
     assert C.config_hash(same) != C.config_hash(cfg)  # away from its neutral value it counts
+
+
+
+@pytest.mark.parametrize("key, bad, bounds", [
+    ("twist_density", 3.5, C.TWIST_DENSITY_RANGE),
+    ("twist_density_current", -3.2, C.TWIST_DENSITY_RANGE),
+    ("extension", 2.5, C.EXTENSION_RANGE), ("force_multiple", 1200.0, C.FORCE_MULTIPLE_RANGE)])
+def test_a_control_has_the_same_bounds_as_a_scene_key_and_as_a_sweep_axis(key, bad, bounds):
+    # issue #27: one range per control. The sweep axis bounded Phi*a to [-3, 3] while the
+    # scene key took any number: a value one refuses, the other must refuse too, saying the
+    # same range
+    with pytest.raises(C.ConfigError) as as_key:
+        C.validate_scene(with_(SCENE, f"loading.{key}", bad), SCENES)
+    with pytest.raises(C.ConfigError) as as_axis:
+        C.validate_sweep(with_(SWEEP, f"sweep.axes.{key}", [bounds[0], bad])["sweep"])
+    assert as_key.value.path == f"loading.{key}"
+    assert as_axis.value.path == f"sweep.axes.{key}"
+    for error in (as_key.value, as_axis.value):
+        assert f"{bounds[0]:g} " in error.allowed and f"<= {bounds[1]:g}" in error.allowed
+    if key != "force_multiple":  # (1000 F_C would stretch this rod without bound)
+        C.validate_scene(with_(SCENE, f"loading.{key}", bounds[1]), SCENES)  # the bound is in
