@@ -30,9 +30,12 @@ creep). The Fig 2a plectoneme at n = 64 held 40 s is the same: the kernel's resi
 stops at 5.4e-6 and slowly grows, its stiffness has an eigenvalue at zero (ω² = −0.006
 s⁻², within the test's noise floor: neutral, the strands sliding on each other), and
 Newton stays at 5.5e-6. Frictionless contact leaves these shapes on a slow drift, not at
-an isolated equilibrium. A continuation solver with contact (issue #28) has to take this
-on: say where a shape has no isolated equilibrium, step along the neutral modes, or keep
-the kernel as the corrector there.
+an isolated equilibrium. What is left of the residual lies along one or two soft modes:
+`solve_beside_soft_modes` leaves the softest directions of the mass-weighted stiffness out
+of the Newton step, and from the kernel's settled solenoid and plectoneme (n = 64 and 80)
+the rest converges to 1e-8 in 9-13 steps while the state moves by 0.013-0.033 radii; the force
+left along the soft modes is reported (docs/performance.md, "A static corrector beside
+the soft modes").
 
 Unknowns (`StaticModel.unknowns`):
     the free position components of the nodes (held components are not unknowns), then a
@@ -710,3 +713,86 @@ def solve(model: StaticModel, x: np.ndarray, Q: np.ndarray, *, force_scale: floa
         x, Q, r, norm = x_try, Q_try, r_try, norm_try
     return Solution(x, Q, False, norm / force_scale, max_iterations,
                     f"not converged in {max_iterations} Newton steps")
+
+
+@dataclasses.dataclass(frozen=True)
+class SoftSolution:
+    """What `solve_beside_soft_modes` found.
+
+    x (3, n+1), Q (3, 3, n): the last iterate; success: the residual outside the soft
+    directions fell below the tolerance; residual: that residual (the kernel's measure, over
+    the force scale); soft_residual: the residual left along the soft directions (same
+    measure): the force that would still move the state along them, slowly (the creep of a
+    coil or braid held by frictionless contact); soft_values: the singular values of the
+    mass-weighted stiffness M^{-1/2}·K·M^{-1/2} [1/s²] that were left out, smallest last;
+    iterations: Newton steps taken; message: why it stopped.
+    """
+
+    x: np.ndarray
+    Q: np.ndarray
+    success: bool
+    residual: float
+    soft_residual: float
+    soft_values: np.ndarray
+    iterations: int
+    message: str
+
+
+def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
+                            soft_modes: int, force_scale: float, tolerance: float = 1e-8,
+                            max_iterations: int = 30) -> SoftSolution:
+    """Newton's method on every direction but the `soft_modes` softest of the mass-weighted
+    stiffness A = M^{-1/2}·K·M^{-1/2} (its smallest singular values).
+
+    Why: a shape the kernel settles under frictionless self-contact is not an isolated
+    equilibrium. What is left of its residual lies along one or two soft modes (ω² from
+    −5 to 300 s⁻² where A's largest singular value is ~1e8), and plain Newton (`solve`) takes
+    huge steps along them and stalls. Left out, the rest converges quadratically, and what
+    remains is a force along the soft modes alone, reported (`soft_residual`), not hidden
+    (measured: docs/performance.md, "A static corrector beside the soft modes").
+
+    Each step: the SVD A = U·S·Vᵀ (dense: ~0.1 s at 400 unknowns), the step
+    M^{-1/2}·V_k·S_k⁻¹·U_kᵀ·M^{-1/2}·loads over the kept directions k, and a backtracking
+    line search on the 2-norm of the mass-weighted loads outside the soft directions (a
+    Newton direction lowers the 2-norm, not necessarily the kernel's max norm).
+    """
+    if not 0 < soft_modes < model.unknowns:
+        raise ValueError(f"soft_modes: {soft_modes} (allowed: 1 to {model.unknowns - 1})")
+    x, Q = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(Q, dtype=float)
+    kept = model.unknowns - soft_modes
+
+    def split(r: np.ndarray, root_mass: np.ndarray, U: np.ndarray):
+        """(outside, along): the loads r outside and along the soft directions U[:, kept:]."""
+        g = r / root_mass
+        along = U[:, kept:] @ (U[:, kept:].T @ g)
+        return (g - along) * root_mass, along * root_mass
+
+    iteration = 0
+    while True:
+        root_mass = np.sqrt(masses(model, x))
+        r = loads(model, x, Q)
+        K = stiffness_matrix(model, x, Q)
+        U, s, Vt = np.linalg.svd(K / root_mass[:, None] / root_mass[None, :])
+        outside, along = split(r, root_mass, U)
+        norm = residual_norm(model, outside) / force_scale
+        soft = residual_norm(model, along) / force_scale
+        if norm < tolerance:
+            return SoftSolution(x, Q, True, norm, soft, s[kept:], iteration, "converged")
+        if iteration == max_iterations:
+            return SoftSolution(x, Q, False, norm, soft, s[kept:], iteration,
+                                f"not converged in {max_iterations} Newton steps")
+        du = (Vt[:kept].T @ ((U[:, :kept].T @ (r / root_mass)) / s[:kept])) / root_mass
+        merit = np.linalg.norm(outside / root_mass)
+        scale = 1.0
+        for _ in range(30):
+            x_try, Q_try = step_along(model, x, Q, scale * du)
+            merit_try = np.linalg.norm(split(loads(model, x_try, Q_try), root_mass, U)[0]
+                                       / root_mass)
+            if np.isfinite(merit_try) and merit_try < merit:
+                break
+            scale *= 0.5
+        else:
+            return SoftSolution(x, Q, False, norm, soft, s[kept:], iteration,
+                                "no step along the Newton direction lowers the residual")
+        x, Q = x_try, Q_try
+        iteration += 1
