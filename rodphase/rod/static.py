@@ -745,8 +745,9 @@ def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
     stiffness A = M^{-1/2}·K·M^{-1/2} (its smallest singular values).
 
     Why: a shape the kernel settles under frictionless self-contact is not an isolated
-    equilibrium. What is left of its residual lies along one or two soft modes (ω² from
-    −5 to 300 s⁻² where A's largest singular value is ~1e8), and plain Newton (`solve`) takes
+    equilibrium. What is left of its residual lies along one or two soft directions (singular
+    values of A from 0.3 to 500 s⁻² where its largest is ~1e8; an eigenvalue of A can be below
+    zero there: the loops creep), and plain Newton (`solve`) takes
     huge steps along them and stalls. Left out, the rest converges quadratically, and what
     remains is a force along the soft modes alone, reported (`soft_residual`), not hidden
     (measured: docs/performance.md, "A static corrector beside the soft modes").
