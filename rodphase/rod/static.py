@@ -411,38 +411,39 @@ def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
     x = np.ascontiguousarray(x, dtype=float)
     n = x.shape[1] - 1
     pairs = candidate_pairs(model, x)
-    reach = [set(range(max(0, a - model.exclusion - 1), min(n, a + model.exclusion + 1) + 1))
-             if model.fold else {a} for a in range(n + 1)]
-    for i, j in pairs.T:
-        nodes = {int(i), int(i) + 1, int(j), int(j) + 1}
-        for a in nodes:
-            reach[a] |= nodes
+    # reach[a, b]: moving node a changes the contact force on node b (numpy arrays, not
+    # Python sets: the sets cost 110-165 ms a call at n = 80, docs/performance.md)
+    nodes = np.arange(n + 1)
+    if model.fold:
+        reach = np.abs(nodes[:, None] - nodes[None, :]) <= model.exclusion + 1
+    else:
+        reach = np.eye(n + 1, dtype=bool)
+    quads = np.stack([pairs[0], pairs[0] + 1, pairs[1], pairs[1] + 1], axis=1)  # (P, 4)
+    reach[quads[:, :, None], quads[:, None, :]] = True
     if model.fold and model.incompressible:
         # the fold bound takes the smallest radius over the rod (contact.fold_forces), that of
         # the most stretched element: its two nodes reach every fold, wherever it is
         thinnest = int(np.argmax(np.linalg.norm(np.diff(x, axis=1), axis=0)
                                  / model.rod.rest_length))
-        everything = set(range(n + 1))
-        reach[thinnest] |= everything
-        reach[thinnest + 1] |= everything
+        reach[thinnest:thinnest + 2, :] = True
     # a node near an end body is pushed by it, with the reaction on the end node that
     # carries the body; the node's radius follows its two elements, so its neighbours too
     for end in _ends_with_bodies(model):
         near = _near_body(model, x, end)
-        nodes = set(near) | {max(a - 1, 0) for a in near} | {min(a + 1, n) for a in near}
-        for a in nodes:
-            reach[a] |= {max(a - 1, 0), a, min(a + 1, n), end}
-        reach[end] |= nodes | {end}
-    # greedy colouring: a node takes the first colour none of the nodes it shares a reached
-    # node with has taken
-    reached_by = [set() for _ in range(n + 1)]
-    for a in range(n + 1):
-        for b in reach[a]:
-            reached_by[b].add(a)
+        pushed = np.unique(np.concatenate([near, np.maximum(near - 1, 0),
+                                           np.minimum(near + 1, n)]))
+        for a in pushed:
+            reach[a, [max(a - 1, 0), a, min(a + 1, n), end]] = True
+        reach[end, pushed] = True
+        reach[end, end] = True
+    # greedy colouring in node order: a node takes the first colour none of the nodes it
+    # shares a reached node with has taken
+    shares = (reach.astype(np.int64) @ reach.T.astype(np.int64)) > 0
     colour = np.full(n + 1, -1)
     for a in range(n + 1):
-        taken = {colour[c] for b in reach[a] for c in reached_by[b] if colour[c] >= 0}
-        colour[a] = next(c for c in range(n + 2) if c not in taken)
+        taken = colour[shares[a] & (colour >= 0)]
+        free_colours = np.setdiff1d(np.arange(n + 2), taken)
+        colour[a] = free_colours[0]
     index = np.full((3, n + 1), -1)  # the unknown of each free position component
     index[model.free[0], model.free[1]] = np.arange(model.positions)
     h = 1e-6 * model.length_scale
@@ -457,10 +458,10 @@ def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
                 column = index[comp, a]
                 if column < 0:
                     continue
-                for b in reach[a]:
-                    rows = index[:, b]
-                    ok = rows >= 0
-                    K[rows[ok], column] = -difference[ok, b]
+                reached = np.flatnonzero(reach[a])
+                rows = index[:, reached]
+                ok = rows >= 0
+                K[rows[ok], column] = -difference[:, reached][ok]
     return K
 
 
