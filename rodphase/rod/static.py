@@ -770,9 +770,9 @@ def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
         return (g - along) * root_mass, along * root_mass
 
     iteration = 0
+    r = loads(model, x, Q)
     while True:
         root_mass = np.sqrt(masses(model, x))
-        r = loads(model, x, Q)
         K = stiffness_matrix(model, x, Q)
         U, s, Vt = np.linalg.svd(K / root_mass[:, None] / root_mass[None, :])
         outside, along = split(r, root_mass, U)
@@ -788,13 +788,13 @@ def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
         scale = 1.0
         for _ in range(30):
             x_try, Q_try = step_along(model, x, Q, scale * du)
-            merit_try = np.linalg.norm(split(loads(model, x_try, Q_try), root_mass, U)[0]
-                                       / root_mass)
+            r_try = loads(model, x_try, Q_try)
+            merit_try = np.linalg.norm(split(r_try, root_mass, U)[0] / root_mass)
             if np.isfinite(merit_try) and merit_try < merit:
                 break
             scale *= 0.5
         else:
             return SoftSolution(x, Q, False, norm, soft, s[kept:], iteration,
                                 "no step along the Newton direction lowers the residual")
-        x, Q = x_try, Q_try
+        x, Q, r = x_try, Q_try, r_try
         iteration += 1
