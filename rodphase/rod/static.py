@@ -31,8 +31,8 @@ stops at 5.4e-6 and slowly grows, its stiffness has an eigenvalue at zero (ω² 
 s⁻², within the test's noise floor: neutral, the strands sliding on each other), and
 Newton stays at 5.5e-6. Frictionless contact leaves these shapes on a slow drift, not at
 an isolated equilibrium. What is left of the residual lies along one or two soft modes:
-`solve_beside_soft_modes` leaves the softest directions of the mass-weighted stiffness out
-of the Newton step, and from the kernel's settled solenoid and plectoneme (n = 64 and 80)
+`solve_beside_soft_modes` leaves the eigen-directions of the mass-weighted stiffness nearest
+zero out of the Newton step, and from the kernel's settled solenoid and plectoneme (n = 64 and 80)
 the rest converges to 1e-8 in 9-13 steps while the state moves by 0.013-0.033 radii; the force
 left along the soft modes is reported (docs/performance.md, "A static corrector beside
 the soft modes").
@@ -716,6 +716,82 @@ def solve(model: StaticModel, x: np.ndarray, Q: np.ndarray, *, force_scale: floa
                     f"not converged in {max_iterations} Newton steps")
 
 
+def _real_basis(vectors: np.ndarray, count: int) -> np.ndarray:
+    """(N, count) an orthonormal real basis of the span of `vectors` (N, k), complex ones
+    taken with their conjugates (a complex pair spans a real plane)."""
+    both = np.concatenate([vectors.real, vectors.imag], axis=1)
+    U, s, _ = np.linalg.svd(both, full_matrices=False)
+    return U[:, :count]
+
+
+@dataclasses.dataclass(frozen=True)
+class SoftFactorization:
+    """The factorized Newton system of `solve_beside_soft_modes` at one state, reusable at
+    states nearby (chord iterations, the next step of a continuation).
+
+    With A = M^{-1/2}·K·M^{-1/2} (M: `masses`), right (N, k) and left (N, k): orthonormal
+    real bases of the eigenvectors of A and of Aᵀ for its k eigenvalues nearest zero, `values`
+    (k,) [1/s², complex for a pair]. The bordered system [A left; rightᵀ 0]·(y, μ) = (g, 0)
+    has a unique solution when the rest of A is regular: y is the Newton step (mass-weighted)
+    with no component along the soft modes, for the loads g with the part along `left`
+    (which A cannot balance) taken off by μ.
+    """
+
+    root_mass: np.ndarray
+    right: np.ndarray
+    left: np.ndarray
+    values: np.ndarray
+    bordered: object  # scipy.sparse.linalg.SuperLU of the bordered matrix
+
+    def split(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(outside, along): the loads r (N,) outside and along the soft directions."""
+        g = r / self.root_mass
+        along = self.left @ (self.left.T @ g)
+        return (g - along) * self.root_mass, along * self.root_mass
+
+    def merit(self, r: np.ndarray) -> float:
+        """The mass-weighted 2-norm of the loads outside the soft directions."""
+        g = r / self.root_mass
+        return float(np.linalg.norm(g - self.left @ (self.left.T @ g)))
+
+    def step(self, r: np.ndarray) -> np.ndarray:
+        """du (N,): the Newton step for the loads r beside the soft modes."""
+        kept = len(self.root_mass)
+        rhs = np.concatenate([r / self.root_mass, np.zeros(self.right.shape[1])])
+        return self.bordered.solve(rhs)[:kept] / self.root_mass
+
+
+def soft_factorization(model: StaticModel, x: np.ndarray, Q: np.ndarray,
+                       soft_modes: int) -> SoftFactorization:
+    """The bordered Newton system beside the `soft_modes` eigenvalues of A nearest zero at
+    (x, Q), factorized (SuperLU). The soft directions by shift-invert Arnoldi on a sparse LU
+    of A (of A and of Aᵀ: K is not symmetric); a dense eigensolver for a small A."""
+    from scipy.sparse import bmat, csc_matrix
+    from scipy.sparse.linalg import LinearOperator, eigs, splu
+
+    root_mass = np.sqrt(masses(model, x))
+    K = stiffness_matrix(model, x, Q)
+    A = csc_matrix(K / root_mass[:, None] / root_mass[None, :])
+    N = A.shape[0]
+    if N <= 4 * (soft_modes + 2):
+        values, left, right = scipy.linalg.eig(A.toarray(), left=True, right=True)
+        nearest = np.argsort(np.abs(values))[:soft_modes]
+        values, right, left = values[nearest], right[:, nearest], left[:, nearest]
+    else:
+        # near zero, A's LU (shift 0) is the shift-invert operator of both A and Aᵀ
+        lu = splu(A)
+        inverse = LinearOperator((N, N), matvec=lu.solve, dtype=float)
+        inverse_t = LinearOperator((N, N), matvec=lambda b: lu.solve(b, trans="T"),
+                                   dtype=float)
+        values, right = eigs(A, k=soft_modes, sigma=0.0, OPinv=inverse, which="LM", tol=1e-8)
+        _, left = eigs(A.T.tocsc(), k=soft_modes, sigma=0.0, OPinv=inverse_t, which="LM",
+                       tol=1e-8)
+    right, left = _real_basis(right, soft_modes), _real_basis(left, soft_modes)
+    bordered = splu(bmat([[A, csc_matrix(left)], [csc_matrix(right.T), None]], format="csc"))
+    order = np.argsort(-np.abs(values))  # smallest last
+    return SoftFactorization(root_mass, right, left, values[order], bordered)
+
+
 @dataclasses.dataclass(frozen=True)
 class SoftSolution:
     """What `solve_beside_soft_modes` found.
@@ -724,9 +800,12 @@ class SoftSolution:
     directions fell below the tolerance; residual: that residual (the kernel's measure, over
     the force scale); soft_residual: the residual left along the soft directions (same
     measure): the force that would still move the state along them, slowly (the creep of a
-    coil or braid held by frictionless contact); soft_values: the singular values of the
-    mass-weighted stiffness M^{-1/2}·K·M^{-1/2} [1/s²] that were left out, smallest last;
-    iterations: Newton steps taken; message: why it stopped.
+    coil or braid held by frictionless contact); soft_values: the eigenvalues of the
+    mass-weighted stiffness M^{-1/2}·K·M^{-1/2} [1/s²] that were left out, smallest in
+    magnitude last (complex for a pair); iterations: Newton steps taken; factorizations:
+    how many of them formed and factorized the stiffness (the others reused it: chord
+    steps); factorization: the last one, for a caller to start the next solve from; message:
+    why it stopped.
     """
 
     x: np.ndarray
@@ -736,65 +815,87 @@ class SoftSolution:
     soft_residual: float
     soft_values: np.ndarray
     iterations: int
+    factorizations: int
+    factorization: SoftFactorization
     message: str
+
+
+# a chord step (a reused factorization) is kept when it cuts the merit at least this much;
+# otherwise the stiffness is formed again at the current state (a fresh Newton step
+# converges quadratically near the solution, a chord step linearly at the rate its
+# factorization's age allows)
+CHORD_CONTRACTION = 0.5
 
 
 def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
                             soft_modes: int, force_scale: float, tolerance: float = 1e-8,
-                            max_iterations: int = 30) -> SoftSolution:
-    """Newton's method on every direction but the `soft_modes` softest of the mass-weighted
-    stiffness A = M^{-1/2}·K·M^{-1/2} (its smallest singular values).
+                            max_iterations: int = 30,
+                            factorization: SoftFactorization | None = None) -> SoftSolution:
+    """Newton's method on every direction but the `soft_modes` eigen-directions of the
+    mass-weighted stiffness A = M^{-1/2}·K·M^{-1/2} nearest zero.
 
     Why: a shape the kernel settles under frictionless self-contact is not an isolated
-    equilibrium. What is left of its residual lies along one or two soft directions (singular
-    values of A from 0.3 to 500 s⁻² where its largest is ~1e8; an eigenvalue of A can be below
-    zero there: the loops creep), and plain Newton (`solve`) takes
-    huge steps along them and stalls. Left out, the rest converges quadratically, and what
-    remains is a force along the soft modes alone, reported (`soft_residual`), not hidden
-    (measured: docs/performance.md, "A static corrector beside the soft modes").
+    equilibrium. What is left of its residual lies along one or two soft directions
+    (eigenvalues of A from −5 to 500 s⁻² where its largest is ~1e8: the loops creep or
+    slide), and plain Newton (`solve`) takes huge steps along them and stalls. Left out, the
+    rest converges quadratically, and what remains is a force along the soft modes alone,
+    reported (`soft_residual`), not hidden (measured: docs/performance.md, "A static
+    corrector beside the soft modes").
 
-    Each step: the SVD A = U·S·Vᵀ (dense: ~0.1 s at 400 unknowns), the step
-    M^{-1/2}·V_k·S_k⁻¹·U_kᵀ·M^{-1/2}·loads over the kept directions k, and a backtracking
-    line search on the 2-norm of the mass-weighted loads outside the soft directions (a
-    Newton direction lowers the 2-norm, not necessarily the kernel's max norm).
+    Each step solves the bordered system of `soft_factorization` (sparse LU) for the loads.
+    A step from a factorization of an earlier state (a chord step: `factorization` given, or
+    the last one reused) is kept when it cuts the merit (the mass-weighted 2-norm of the
+    loads outside the soft directions) by CHORD_CONTRACTION; otherwise the stiffness is
+    formed again. A fresh step is line-searched (halving) on that merit: a Newton direction
+    lowers the 2-norm, not necessarily the kernel's max norm.
     """
     if not 0 < soft_modes < model.unknowns:
         raise ValueError(f"soft_modes: {soft_modes} (allowed: 1 to {model.unknowns - 1})")
     x, Q = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(Q, dtype=float)
-    kept = model.unknowns - soft_modes
-
-    def split(r: np.ndarray, root_mass: np.ndarray, U: np.ndarray):
-        """(outside, along): the loads r outside and along the soft directions U[:, kept:]."""
-        g = r / root_mass
-        along = U[:, kept:] @ (U[:, kept:].T @ g)
-        return (g - along) * root_mass, along * root_mass
-
+    factorizations = 0
+    fresh = factorization is None
+    if fresh:
+        factorization = soft_factorization(model, x, Q, soft_modes)
+        factorizations = 1
     iteration = 0
     r = loads(model, x, Q)
     while True:
-        root_mass = np.sqrt(masses(model, x))
-        K = stiffness_matrix(model, x, Q)
-        U, s, Vt = np.linalg.svd(K / root_mass[:, None] / root_mass[None, :])
-        outside, along = split(r, root_mass, U)
+        outside, along = factorization.split(r)
         norm = residual_norm(model, outside) / force_scale
         soft = residual_norm(model, along) / force_scale
+
+        def report(success: bool, message: str) -> SoftSolution:
+            return SoftSolution(x, Q, success, norm, soft, factorization.values, iteration,
+                                factorizations, factorization, message)
+
         if norm < tolerance:
-            return SoftSolution(x, Q, True, norm, soft, s[kept:], iteration, "converged")
+            return report(True, "converged")
         if iteration == max_iterations:
-            return SoftSolution(x, Q, False, norm, soft, s[kept:], iteration,
-                                f"not converged in {max_iterations} Newton steps")
-        du = (Vt[:kept].T @ ((U[:, :kept].T @ (r / root_mass)) / s[:kept])) / root_mass
-        merit = np.linalg.norm(outside / root_mass)
+            return report(False, f"not converged in {max_iterations} Newton steps")
+        merit = factorization.merit(r)
+        du = factorization.step(r)
+        if not fresh:  # a chord step: kept if it contracts, else the stiffness anew
+            x_try, Q_try = step_along(model, x, Q, du)
+            r_try = loads(model, x_try, Q_try)
+            merit_try = factorization.merit(r_try)
+            if np.isfinite(merit_try) and merit_try < CHORD_CONTRACTION * merit:
+                x, Q, r = x_try, Q_try, r_try
+                iteration += 1
+                continue
+            factorization = soft_factorization(model, x, Q, soft_modes)
+            factorizations += 1
+            fresh = True
+            continue
         scale = 1.0
         for _ in range(30):
             x_try, Q_try = step_along(model, x, Q, scale * du)
             r_try = loads(model, x_try, Q_try)
-            merit_try = np.linalg.norm(split(r_try, root_mass, U)[0] / root_mass)
+            merit_try = factorization.merit(r_try)
             if np.isfinite(merit_try) and merit_try < merit:
                 break
             scale *= 0.5
         else:
-            return SoftSolution(x, Q, False, norm, soft, s[kept:], iteration,
-                                "no step along the Newton direction lowers the residual")
+            return report(False, "no step along the Newton direction lowers the residual")
         x, Q, r = x_try, Q_try, r_try
         iteration += 1
+        fresh = False  # the next step reuses this factorization while it contracts
