@@ -70,6 +70,29 @@ def test_a_disturbed_twisted_rod_below_its_onset_returns_to_the_straight_branch(
     assert np.abs(solution.Q - Q).max() < 1e-9
 
 
+def test_twisting_the_straight_branch_further_lands_on_its_equilibrium_at_the_new_rotation():
+    # The predictor of a continuation step: the straight rod at 0.5 of its onset, twisted
+    # further by 0.3 turns, is the straight equilibrium that onset.straight_equilibrium
+    # builds at 0.5·onset + 0.3 turns on its own (frames to round-off, 1e-12), and its loads
+    # under that rotation vanish to round-off (1e-9 of the buckling force: E·A·1e-16 is
+    # ~1e-10 of it at this radius); left untwisted they would not (the clamp's couple).
+    from rodphase.rod.onset import straight_equilibrium
+    from rodphase.units import TURN
+
+    rod = Rod(length=1.0, radius=0.025, elements=24)
+    turns = 0.5 * StraightBranch(rod, 1.15).onset_turns(1e-4)
+    before = straight_equilibrium(rod, 1.15, turns)
+    after = straight_equilibrium(rod, 1.15, turns + 0.3)
+    x, Q = static.twisted_further(before.state.x, before.state.Q, 0.3 * TURN)
+    assert np.abs(x - after.state.x).max() == 0.0
+    assert np.abs(Q - after.state.Q).max() < 1e-12
+    model = static_model_of(after)
+    scale = rod.buckling_force
+    assert static.residual_norm(model, static.loads(model, x, Q)) < 1e-9 * scale
+    untwisted = static.residual_norm(model, static.loads(model, before.state.x, before.state.Q))
+    assert untwisted > 1e-3 * scale
+
+
 def coil_in_contact(n: int = 48, pitch_over_diameter: float = 0.97):
     """A clamped, loaded rod laid as a three-loop helix whose pitch is 3 % short of touching
     (neighbouring loops overlap by about 3 % of the diameter): a state in self-contact built
@@ -198,6 +221,41 @@ def test_newton_beside_the_two_softest_modes_converges_from_the_kernels_settled_
     assert np.abs(solution.soft_values).max() < 1e-5 * np.linalg.norm(A, 2), solution.soft_values
     with pytest.raises(ValueError, match="soft_modes"):
         static.solve_beside_soft_modes(model, x, Q, soft_modes=0, force_scale=scale)
+
+
+def test_a_continuation_step_in_twist_reuses_the_corrector_factorization(settled_solenoid):
+    # One step of a twist continuation from the corrected solenoid: the end turned by
+    # 0.005 in Φa (0.032 turns), the predictor spreading that twist along the rod
+    # (static.twisted_further), then the corrector started from the previous state's
+    # factorization. Measured: 9 Newton steps of which 3 formed a stiffness (the others
+    # reused one: chord steps), residual 7e-9 outside the soft modes, writhe up by 0.005 of
+    # the 0.032 turns of link added. A state this close is the regime a continuation runs
+    # in; with 5× the step the corrector on this solenoid fails at the fourth step
+    # (docs/performance.md, "A twist continuation beside the soft modes").
+    import dataclasses
+
+    from rodphase import topology
+    from rodphase.rod import kernel
+    from rodphase.units import TURN
+
+    problem, _, model, x, Q, scale = settled_solenoid
+    start = static.solve_beside_soft_modes(model, x, Q, soft_modes=2, force_scale=scale)
+    assert start.success, start.message
+    added = 0.005 * problem.rod.length / problem.rod.radius / TURN  # turns
+    now = model.now.copy()
+    now[kernel.T_END_ROTATION] += added * TURN
+    turned = dataclasses.replace(model, now=now)
+    x_predicted, Q_predicted = static.twisted_further(start.x, start.Q, added * TURN)
+    unpredicted = static.residual_norm(turned, static.loads(turned, start.x, start.Q))
+    predicted = static.residual_norm(turned, static.loads(turned, x_predicted, Q_predicted))
+    assert predicted < 0.05 * unpredicted, (predicted, unpredicted)
+    step = static.solve_beside_soft_modes(turned, x_predicted, Q_predicted, soft_modes=2,
+                                          force_scale=scale,
+                                          factorization=start.factorization)
+    assert step.success, step.message
+    assert step.factorizations < step.iterations, step  # chord steps were taken
+    gained = topology.writhe(step.x.T) - topology.writhe(start.x.T)
+    assert 0.0 < gained < added, (gained, added)
 
 
 def kernel_residual(problem: Problem) -> float:

@@ -35,7 +35,10 @@ an isolated equilibrium. What is left of the residual lies along one or two soft
 zero out of the Newton step, and from the kernel's settled solenoid and plectoneme (n = 64 and 80)
 the rest converges to 1e-8 in 9-13 steps while the state moves by 0.013-0.033 radii; the force
 left along the soft modes is reported (docs/performance.md, "A static corrector beside
-the soft modes").
+the soft modes"). Stepped in twist from there (`twisted_further` as the predictor), the
+corrector follows such a shape for 0 to 0.1 of Φa only: the shape takes up twist along the
+modes the corrector leaves out (docs/performance.md, "A twist continuation beside the soft
+modes").
 
 Unknowns (`StaticModel.unknowns`):
     the free position components of the nodes (held components are not unknowns), then a
@@ -611,6 +614,20 @@ def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarr
     turns = Rotation.from_rotvec(-size * np.asarray(rotation, float)).as_matrix()  # (n, 3, 3)
     Q = np.ascontiguousarray(np.einsum("irs,sci->rci", turns, Q))
     return np.ascontiguousarray(x + size * mode.T), Q
+
+
+def twisted_further(x: np.ndarray, Q: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """(x, Q) with `angle` [rad] more twist spread evenly along the rod: element i's frame
+    turned about its own d3 by angle·(i + ½)/n, as model.straight_state spreads a twist;
+    the nodes stay. The predictor of a step in the end rotation: the twist a turned end
+    adds runs through the whole rod at once (the twist stiffness is the rod's stiffest
+    soft direction), so this is the equilibrium of the straight branch at the new rotation,
+    and close to it on a coiled one (measured on Fig 2b's solenoid, n = 64, +0.025 Φa:
+    the residual 0.062 of the force scale against 7.9 with the frames left as they were)."""
+    n = Q.shape[2]
+    turn = np.zeros((n, 3))
+    turn[:, 2] = angle * (np.arange(n) + 0.5) / n
+    return displaced(x, Q, np.zeros((n + 1, 3)), turn, 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
