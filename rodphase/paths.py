@@ -23,9 +23,12 @@ lateral block, milliseconds at n = 80). So the path is:
 
 Why the branches past the jump are followed dynamically rather than by Newton continuation:
 the kernel's settled plectonemes and solenoids are not isolated equilibria with frictionless
-contact (rod/static.py, its docstring: neutral sliding modes, a creeping solenoid), so a
-static corrector has no solution to converge to there. The onset, where the branch does have
-one, is static.
+contact (rod/static.py, its docstring: neutral sliding modes, a creeping solenoid). A static
+corrector converges there only beside those soft modes (static.solve_beside_soft_modes), and
+they are how the shape takes up twist: a static path in twist fails after 0 to 0.1 of Φa in
+steps of 0.005, and where it runs it costs 10-30 times what the kernel's ramp and hold cost
+per unit of twist (docs/performance.md, "A twist continuation beside the soft modes"). The
+onset, where the branch does have an isolated equilibrium, is static.
 
 Each sample's result records its place on the path (diagnostics["path"]): the column, its
 rank in the column, θ_c, how it was reached, and the elements of the run it came from.
