@@ -1,11 +1,13 @@
 #!/usr/bin/env python
-"""Fig 3 by two methods, cost against precision: the independent sweep (configs/fig3_paper.yaml,
+r"""Fig 3 by two methods, cost against precision: the independent sweep (configs/fig3_paper.yaml,
 200 Sobol points, each its own run) and the paths sampler (configs/fig3_paths.yaml, 20 loads ×
 10 twists, one path per load: rodphase/paths.py; and 40 loads × 5 twists, which shares less
 and balances the two workers better).
 
     python benchmarks/map_methods.py reference [--samples 60]   # the fine reference, --jobs 2
     python benchmarks/map_methods.py compare [--rounds 2]       # the two maps, interleaved
+    python benchmarks/map_methods.py compare --rounds 1 --block map_tolerance --methods \
+        "independent;paths;independent, hold tolerance 3e-3;paths, hold tolerance 3e-3"
 
 `reference` runs random points that are in neither map (the Sobol sequence of another seed,
 4242) with the paper's protocol step by step (from rest: loading.quasi_static_below = 0), at
@@ -16,8 +18,10 @@ turns/s): finer, slower and independent of both methods' shortcuts.
 (numba's cache warm), and measures for each: wall time, CPU time (user + system of the sweep
 and its workers), labels, failed runs, and the boundary error against the reference: the
 share of reference points whose label the map's nearest point (in the box scaled to [0, 1]²)
-gets wrong (studytools.boundary_error). Writes out/perf/map_methods.json and, with --write,
-the block "map_methods" of docs/performance.md. The machine and its load are printed with it.
+gets wrong (studytools.boundary_error). Writes out/perf/BLOCK.json and, with --write, the
+block BLOCK of docs/performance.md (--block, default "map_methods"). --methods picks the maps
+(METHODS; by default the three above; the hold-tolerance variants ask what a looser
+solver.hold_tolerance costs in labels). The machine and its load are printed with it.
 """
 
 from __future__ import annotations
@@ -37,7 +41,14 @@ OUT = ROOT / "out" / "perf"
 # name: (config, --set items)
 METHODS = {"independent": ("configs/fig3_paper.yaml", []),
            "paths": ("configs/fig3_paths.yaml", []),
-           "paths, 40 columns": ("configs/fig3_paths.yaml", ["sweep.columns=40"])}
+           "paths, 40 columns": ("configs/fig3_paths.yaml", ["sweep.columns=40"]),
+           # the holds end when the residual creeps under the tolerance (docs/performance.md,
+           # "A twist continuation beside the soft modes"): what a looser one costs in labels
+           "independent, hold tolerance 3e-3": ("configs/fig3_paper.yaml",
+                                                ["solver.hold_tolerance=3e-3"]),
+           "paths, hold tolerance 3e-3": ("configs/fig3_paths.yaml",
+                                          ["solver.hold_tolerance=3e-3"])}
+DEFAULT_METHODS = ("independent", "paths", "paths, 40 columns")
 REFERENCE_SET = ["sweep.seed=4242", "rod.elements=140", "solver.safety=0.25",
                  "loading.quasi_static_below=0", "loading.twist_rate=0.25"]
 AXES = ("twist_density", "extension")
@@ -55,13 +66,15 @@ def reference(samples: int, jobs: int) -> None:
     print(json.dumps(info, indent=1))
 
 
-def compare(rounds: int, jobs: int, write: bool) -> None:
+def compare(rounds: int, jobs: int, write: bool, methods=DEFAULT_METHODS,
+            block: str = "map_methods") -> None:
     ref = sweep_table(OUT / "map_reference.h5")
     ref = ref[ref["phase"] != "failed"]
     rows = []
     before = machine()
     for r in range(rounds):
-        for name, (config, sets) in METHODS.items():
+        for name in methods:
+            config, sets = METHODS[name]
             store = OUT / f"map_{name.replace(', ', '_').replace(' ', '_')}_{r}.h5"
             store.unlink(missing_ok=True)
             wall, cpu = timed_sweep(config, store, sets, jobs)
@@ -73,7 +86,7 @@ def compare(rounds: int, jobs: int, write: bool) -> None:
             rows.append(row)
             print(row, flush=True)
     after = machine()
-    (OUT / "map_methods.json").write_text(json.dumps(
+    (OUT / f"{block}.json").write_text(json.dumps(
         {"rows": rows, "machine_before": before, "machine_after": after,
          "reference": len(ref)}, indent=1))
     frame = pd.DataFrame(rows)
@@ -89,7 +102,7 @@ def compare(rounds: int, jobs: int, write: bool) -> None:
     lines += ["", "Mean over the rounds (ratio: independent / method):", "",
               "| method | wall [s] | CPU [s] | wall ratio | CPU ratio | boundary error |",
               "|---|---|---|---|---|---|"]
-    for name in METHODS:
+    for name in methods:
         m = mean.loc[name]
         lines.append(f"| {name} | {m['wall']:.1f} | {m['cpu']:.1f} | "
                      f"{mean.loc['independent', 'wall'] / m['wall']:.2f} | "
@@ -97,7 +110,7 @@ def compare(rounds: int, jobs: int, write: bool) -> None:
     text = "\n".join(lines)
     print(text)
     if write:
-        write_block(ROOT / "docs" / "performance.md", "map_methods", text)
+        write_block(ROOT / "docs" / "performance.md", block, text)
 
 
 def machine_line(before: dict, after: dict) -> str:
@@ -113,13 +126,23 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2, help="compare: rounds")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--write", action="store_true", help="compare: update docs/performance.md")
+    parser.add_argument("--methods", default=";".join(DEFAULT_METHODS),
+                        help="compare: the methods, separated by ';', 'independent' among them "
+                        f"(known: {'; '.join(METHODS)})")
+    parser.add_argument("--block", default="map_methods",
+                        help="compare: the block of docs/performance.md and the JSON's name")
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     os.chdir(ROOT)
     if args.step == "reference":
         reference(args.samples, args.jobs)
     else:
-        compare(args.rounds, args.jobs, args.write)
+        methods = [name.strip() for name in args.methods.split(";") if name.strip()]
+        unknown = [name for name in methods if name not in METHODS]
+        if unknown or "independent" not in methods:
+            parser.error(f"--methods: {args.methods!r} (allowed: names of {list(METHODS)}, "
+                         "'independent' among them: the ratios are against it)")
+        compare(args.rounds, args.jobs, args.write, methods, args.block)
 
 
 if __name__ == "__main__":
