@@ -619,11 +619,11 @@ def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarr
 def twisted_further(x: np.ndarray, Q: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
     """(x, Q) with `angle` [rad] more twist spread evenly along the rod: element i's frame
     turned about its own d3 by angle·(i + ½)/n, as model.straight_state spreads a twist;
-    the nodes stay. The predictor of a step in the end rotation: the twist a turned end
-    adds runs through the whole rod at once (the twist stiffness is the rod's stiffest
-    soft direction), so this is the equilibrium of the straight branch at the new rotation,
-    and close to it on a coiled one (measured on Fig 2b's solenoid, n = 64, +0.025 Φa:
-    the residual 0.062 of the force scale against 7.9 with the frames left as they were)."""
+    the nodes stay. The predictor of a step in the end rotation: a turned end's twist
+    spreads along the whole rod, evenly on the straight branch (this is its equilibrium at
+    the new rotation, tests/test_static.py) and nearly so on a coiled one (measured on Fig
+    2b's solenoid, n = 64, +0.025 in Φa: a residual of 0.062 of the force scale against 7.9
+    with the frames left as they were)."""
     n = Q.shape[2]
     turn = np.zeros((n, 3))
     turn[:, 2] = angle * (np.arange(n) + 0.5) / n
