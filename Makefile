@@ -46,7 +46,7 @@ clean:  ## remove outputs (keeps .venv)
 ##@ Benchmarks (benchmarks/; the timings depend on the machine and its load, see docs/benchmarks.md)
 # `make bench` is the four that docs/benchmarks.md reports; each script also has its own target.
 .PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
-	bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods \
+	bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
 	bit-identical base-tree
 BASE ?= main
 BASE_TREE = $(OUT)/base-rodphase
@@ -96,6 +96,11 @@ bench-map-methods: $(STAMP)  ## Fig 3 independent vs along paths: CPU, wall, bou
 	@test -f out/perf/map_reference.h5 || $(BIN)/python benchmarks/map_methods.py reference
 	$(BIN)/python benchmarks/map_methods.py compare --rounds 2 --write
 
+bench-map-tolerance: $(STAMP)  ## Fig 3 both samplers at hold tolerance 1e-3 and 3e-3 against the fine reference (~25 min)
+	@test -f out/perf/map_reference.h5 || $(BIN)/python benchmarks/map_methods.py reference
+	$(BIN)/python benchmarks/map_methods.py compare --rounds 2 --block map_tolerance --methods \
+		"independent;paths;independent, hold tolerance 3e-3;paths, hold tolerance 3e-3"
+
 bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tree bit-identical to BASE (default main)?
 	PYTHONPATH=$(abspath $(BASE_TREE)) $(BIN)/python benchmarks/reference_positions.py $(OUT)/positions_base.npz
 	PYTHONPATH=$(CURDIR) $(BIN)/python benchmarks/reference_positions.py $(OUT)/positions_here.npz
@@ -104,7 +109,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 ##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
 .PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
-	robustness study-shear study-damping study-friction study-neo-hookean
+	robustness study-shear study-damping study-friction study-neo-hookean static-path hold-budget
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -188,5 +193,14 @@ vibration-source: $(STAMP)  ## which part of the model sustains the vibration of
 
 robustness: $(STAMP)  ## the store under attack: kills, signals, a full disk, bad input (docs/robustness.md)
 	$(BIN)/python studies/robustness.py --kills 60 --write docs/robustness.md
+
+static-path: $(STAMP)  ## Fig 3 columns followed in twist by the static corrector, against the kernel (performance.md)
+	$(BIN)/python studies/static_path.py --force-multiple 25 --start 0.9 --stop 1.25 --compare 1.0 1.1 1.25 --write docs/performance.md
+	$(BIN)/python studies/static_path.py --force-multiple 90 --start 1.55 --stop 1.9 --compare 1.65 1.75 1.9 --write docs/performance.md
+
+hold-budget: $(STAMP)  ## where fig3_paths' work goes: twist ramps against holds, how the holds end
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase sweep configs/fig3_paths.yaml -o $(OUT)/fig3_paths.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
+	$(BIN)/python studies/hold_budget.py $(OUT)/fig3_paths.h5
 
 include studies/figures.mk

@@ -302,3 +302,31 @@ def test_every_benchmark_and_study_is_run_by_a_make_target():
     scripts = {f"{p.parent.name}/{p.name}" for d in (BENCHMARKS, STUDIES) for p in d.glob("*.py")}
     assert scripts - run == set(), "scripts no make target runs"
     assert run - scripts == set(), "make targets that run scripts that do not exist"
+
+
+def test_static_path_steps_a_coarse_column_and_compares_with_the_kernel(tmp_path, doc):
+    # make static-path: the kernel settles a coarse rod, the corrector steps its twist twice,
+    # the kernel runs the end point on its own (and from the path, had it stopped short)
+    script("static_path", "--elements", "24", "--start", "0.9", "--stop", "0.91", "--step",
+           "0.005", "--compare", "0.91", "--write", doc, cwd=tmp_path)
+    text = block(doc, "static_path_25")
+    assert "n = 24, 25 F_C, 2 soft modes" in text
+    assert re.search(r"^\| 0\.905 \| \d+ \| \d+ \| ", text, re.M)
+    assert re.search(r"^\| 0\.91 \| \w+, [\d.]+ \| -?[\d.]+, -?[\d.]+ \| ", text, re.M)
+
+
+def test_hold_budget_splits_a_small_path_maps_work(tmp_path):
+    # make hold-budget: a paths map of 4 coarse samples in 2 columns, then the budget
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in env.get("PYTHONPATH", "")
+                                                       .split(os.pathsep) if p])
+    store = tmp_path / "paths.h5"
+    rodphase = str(Path(sys.executable).with_name("rodphase"))  # the installed command
+    done = subprocess.run([rodphase, "sweep", "fig3_paths", "-o", store,
+                           "--jobs", "1", "--set", "sweep.samples=4", "--set", "sweep.columns=2",
+                           "--set", "rod.elements=24", "--set", "solver.refine_up_to=24"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode in (0, 1), done.stdout[-3000:] + done.stderr[-3000:]
+    out = script("hold_budget", store, cwd=tmp_path).stdout
+    assert re.search(r"dynamic runs; element-steps: ", out), out
+    assert re.search(r"\d+ holds: rod time median [\d.]+ s", out), out
