@@ -41,12 +41,12 @@ import numpy as np
 from rodphase import classify, topology
 from rodphase import config as C
 from rodphase.rod import kernel, static
-from rodphase.rod.model import RodState, Stage, ramp
+from rodphase.rod.model import RodState
 from rodphase.rod.simulate import clamp_reference, force_scale, static_model_of
 from rodphase.runner import run
-from rodphase.scenes import SCENES, build
+from rodphase.scenes import SCENES, build, twist_stages
 from rodphase.studytools import machine, write_block
-from rodphase.units import TURN
+from rodphase.units import TURN, turns_for_twist_density
 
 # turns/s: the twist rate of tests/test_static.py's settled states, and of the kernel's
 # ramp where it takes over from the path
@@ -54,10 +54,12 @@ RATE = 1.0
 
 
 def scene_at(elements: int, force_multiple: float, phi: float):
+    """(config, problem) of the scene at twist Φa = phi."""
     overrides = [("rod.elements", elements), ("loading.force_multiple", force_multiple),
                  ("loading.twist_density", phi), ("loading.twist_rate", RATE),
                  ("solver.hold_max_time", 8.0)]
-    return build(C.load_scene("twist_under_load", overrides, SCENES))
+    cfg = C.load_scene("twist_under_load", overrides, SCENES)
+    return cfg, build(cfg)
 
 
 def settled(problem):
@@ -70,15 +72,12 @@ def settled(problem):
     return x, Q, result.status, cpu
 
 
-def taken_over(problem, x: np.ndarray, Q: np.ndarray, rotation: float, rate: float):
-    """The kernel from the static state (x, Q) at end rotation `rotation` [rad]: a twist ramp
-    at `rate` [turns/s] to `problem`'s final rotation, then its hold (the clamps as the
-    scene's own run has them). Returns settled(...) of that run."""
+def taken_over(cfg, problem, x: np.ndarray, Q: np.ndarray, rotation: float):
+    """The kernel from the static state (x, Q) at end rotation `rotation` [rad]: the scene's
+    twist ramp (scenes.twist_stages, at its rate) to its twist, then its hold (the clamps as
+    the scene's own run has them). Returns settled(...) of that run."""
+    twist = twist_stages(cfg, C.load_force(cfg), rotation / TURN, C.twist_turns(cfg))
     hold = problem.stages[-1]
-    target = float(hold.controls.end_rotation[1][-1])
-    duration = abs(target - rotation) / TURN / rate
-    twist = Stage(duration, label="twist", controls=dataclasses.replace(
-        hold.controls, end_rotation=ramp(0.0, duration, rotation, target)))
     state = RodState(0.0, x.copy(), np.zeros_like(x), Q.copy(), np.zeros((3, Q.shape[2])))
     return settled(dataclasses.replace(problem, state=state, stages=(twist, hold),
                                        clamp_reference=clamp_reference(problem)))
@@ -108,7 +107,7 @@ def main() -> None:
         print(text, flush=True)
         lines.append(text)
 
-    problem = scene_at(args.elements, args.force_multiple, args.start)
+    _, problem = scene_at(args.elements, args.force_multiple, args.start)
     radius = problem.rod.radius
     scale = force_scale(problem)
     model = static_model_of(problem, controls=problem.stages[-1].controls, contact=True)
@@ -131,7 +130,7 @@ def main() -> None:
     x, Q, factorization = first.x, first.Q, first.factorization
     reached = model.now[kernel.T_END_ROTATION]  # the end rotation of (x, Q) [rad]
     phi, total = args.start, 0.0
-    added = args.step * problem.rod.length / radius  # rad of end rotation per step
+    added = turns_for_twist_density(args.step, radius, problem.rod.length) * TURN  # rad/step
     now = model.now.copy()
     while phi < args.stop - 1e-9:
         phi = round(phi + args.step, 6)
@@ -163,13 +162,13 @@ def main() -> None:
         "| path alignment, writhe | largest node distance [radii] |")
     say("|---|---|---|---|---|---|")
     for target in args.compare:
-        scene = scene_at(args.elements, args.force_multiple, target)
+        cfg, scene = scene_at(args.elements, args.force_multiple, target)
         xk, _, status, cpu = settled(scene)
         ak, wk = shape(xk, radius)
         mine = path.get(round(target, 6))
         how = "static"
         if mine is None:
-            mine, _, taken_status, taken_cpu = taken_over(scene, x, Q, reached, RATE)
+            mine, _, taken_status, taken_cpu = taken_over(cfg, scene, x, Q, reached)
             how = f"kernel from the last static state ({taken_status}), {taken_cpu:.2f}"
         ap, wp = shape(mine, radius)
         say(f"| {target:g} | {status}, {cpu:.2f} | {ak:.2f}, {wk:.3f} | {how} | {ap:.2f}, "

@@ -236,12 +236,12 @@ def test_a_continuation_step_in_twist_reuses_the_corrector_factorization(settled
 
     from rodphase import topology
     from rodphase.rod import kernel
-    from rodphase.units import TURN
+    from rodphase.units import TURN, turns_for_twist_density
 
     problem, _, model, x, Q, scale = settled_solenoid
     start = static.solve_beside_soft_modes(model, x, Q, soft_modes=2, force_scale=scale)
     assert start.success, start.message
-    added = 0.005 * problem.rod.length / problem.rod.radius / TURN  # turns
+    added = turns_for_twist_density(0.005, problem.rod.radius, problem.rod.length)
     now = model.now.copy()
     now[kernel.T_END_ROTATION] += added * TURN
     turned = dataclasses.replace(model, now=now)
