@@ -305,14 +305,18 @@ def test_every_benchmark_and_study_is_run_by_a_make_target():
 
 
 def test_static_path_steps_a_coarse_column_and_compares_with_the_kernel(tmp_path, doc):
-    # make static-path: the kernel settles a coarse rod, the corrector steps its twist twice,
-    # the kernel runs the end point on its own (and from the path, had it stopped short)
-    script("static_path", "--elements", "24", "--start", "0.9", "--stop", "0.91", "--step",
-           "0.005", "--compare", "0.91", "--write", doc, cwd=tmp_path)
+    # make static-path: the kernel settles a coarse rod, the corrector steps its twist once;
+    # the kernel runs both comparison points on its own, and the one past the path's end
+    # also from the path's last state (where the kernel takes over)
+    script("static_path", "--elements", "24", "--start", "0.9", "--stop", "0.905", "--step",
+           "0.005", "--compare", "0.905", "0.95", "--write", doc, cwd=tmp_path)
     text = block(doc, "static_path_25")
     assert "n = 24, 25 F_C, 2 soft modes" in text
     assert re.search(r"^\| 0\.905 \| \d+ \| \d+ \| ", text, re.M)
-    assert re.search(r"^\| 0\.91 \| \w+, [\d.]+ \| -?[\d.]+, -?[\d.]+ \| ", text, re.M)
+    assert re.search(r"^\| 0\.905 \| \w+, [\d.]+ \| -?[\d.]+, -?[\d.]+ \| static \| ", text,
+                     re.M)
+    assert re.search(r"^\| 0\.95 \| \w+, [\d.]+ \| -?[\d.]+, -?[\d.]+ \| kernel from the "
+                     r"last static state \(\w+\), [\d.]+ \| ", text, re.M)
 
 
 def test_hold_budget_splits_a_small_path_maps_work(tmp_path):
