@@ -626,7 +626,8 @@ class _DaskPool:
         self.client, self.cluster, self.where = client, cluster, where
         _drop_cut_gathers(client)
         self.address, self.patience = address, patience
-        self._seen = self._count_workers() > 0  # a worker was there at some time
+        self._seen = False  # a worker was there at some time (counted, or a job came back)
+        self._count_workers()
         self._checked = time.monotonic()
         self._alone_since: float | None = None  # when the last worker left
 
@@ -634,7 +635,7 @@ class _DaskPool:
         info = self.client.scheduler_info().get("workers", {})
         threads = sum(w.get("nthreads", 1) for w in info.values())
         if threads:  # keep the window of the last cluster seen while it has none
-            self.workers = threads
+            self.workers, self._seen = threads, True
         elif not hasattr(self, "workers"):
             self.workers = 1
         self.window = 2 * self.workers
@@ -660,6 +661,10 @@ class _DaskPool:
         if any(f.cancelled() for f in done):
             # the client cancels every future when its connection to the scheduler drops
             raise Outage(f"lost the Dask scheduler at {self.address}")
+        if done:
+            # a job came back, so a worker was there, even if it joined and left between two
+            # counts (the message then says it left, not that none ever joined)
+            self._seen = True
         if time.monotonic() - self._checked > self.CHECK_EVERY:
             self._check_workers()
         return done
@@ -689,7 +694,7 @@ class _DaskPool:
         if threads:
             if self._alone_since is not None:
                 log.warning("%d worker thread(s) in the cluster again", threads)
-            self._alone_since, self._seen = None, True
+            self._alone_since = None
             return
         what = ("every worker left the Dask cluster at {} and none came back" if self._seen
                 else "no worker joined the Dask cluster at {}").format(self.address or "(local)")

@@ -255,6 +255,34 @@ def test_a_result_whose_worker_left_before_it_was_fetched_is_not_waited_for_ever
         pool.close(kill=True)
 
 
+def test_a_worker_that_joined_and_left_between_two_counts_is_said_to_have_left(cluster):
+    # the race behind a failed CI run: the sweep connected before the worker had joined, the
+    # worker ran the first jobs and was killed before the pool next counted the workers, and
+    # the pool said "no worker joined" although the store held its runs
+    from dask.distributed import Client
+
+    from rodphase.sweep import ClusterLost, _DaskPool
+
+    cluster.scheduler()
+    client = Client(cluster.address, timeout=30)
+    pool = _DaskPool(client, None, "test", cluster.address, patience=0.5)
+    pool.CHECK_EVERY = 1e9  # no count of the workers while the job runs: the race, made sure
+    try:
+        worker = cluster.worker()
+        future = client.submit(sum, [1, 2], pure=False)
+        wait_for(lambda: pool.finished([future]), 60, "the job came back")
+        cluster.kill(worker)
+        wait_for(lambda: not client.scheduler_info()["workers"], 30, "the worker was removed")
+        with pytest.raises(ClusterLost, match="every worker left the Dask cluster at "
+                           + cluster.address):
+            deadline = time.time() + 10
+            while time.time() < deadline:
+                pool._check_workers()
+                time.sleep(0.2)
+    finally:
+        pool.close(kill=True)
+
+
 @pytest.mark.parametrize("args, words", [
     (["--backend", "dask", "--scheduler", "tcp://127.0.0.1:9"], "error: --scheduler: "
      "'tcp://127.0.0.1:9' (allowed: a Dask scheduler that answers within"),
