@@ -121,8 +121,7 @@ class StraightBranch:
         now[k.T_END_ROTATION] = TURN * turns
         model = dataclasses.replace(self.model, now=now)
         K = static.stiffness_matrix(model, state.x, state.Q, columns=self.lateral)
-        s = 1.0 / np.sqrt(static.masses(model, state.x)[self.lateral])
-        A = K[np.ix_(self.lateral, self.lateral)] * s[:, None] * s[None, :]
+        A, _ = static.mass_weighted(model, state.x, K, self.lateral)
         return static.symmetric_band(A, self.width)
 
     def stable(self, turns: float) -> bool:

@@ -503,6 +503,20 @@ def masses(model: StaticModel, x: np.ndarray) -> np.ndarray:
     return np.concatenate([node, rotary])
 
 
+def mass_weighted(model: StaticModel, x: np.ndarray, K: np.ndarray,
+                  unknowns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(A, scale): A = M^{-1/2}·K·M^{-1/2} [1/s²], whose eigenvalues are the squared
+    frequencies of the undamped motions about the state (negative: a mode that grows), and
+    scale = M^{-1/2} (M: `masses` at x). With `unknowns`, the block of those rows and columns
+    of K only (the lateral block of the straight rod, rod/onset.py). The one place the
+    stability test, the onset and the corrector scale K: their eigenvalues must agree."""
+    scale = 1.0 / np.sqrt(masses(model, x))
+    if unknowns is not None:
+        scale = scale[unknowns]
+        K = K[np.ix_(unknowns, unknowns)]
+    return K * scale[:, None] * scale[None, :], scale
+
+
 def rod_order(block_of: np.ndarray) -> tuple[np.ndarray, int]:
     """(order, width): the unknowns sorted by block (rod order, in which the stiffness is
     banded: an unknown reaches REACH blocks) and the half bandwidth that follows."""
@@ -550,8 +564,7 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     finite-difference noise of K is ~1e-10 of its scale)."""
     if K is None:
         K = stiffness_matrix(model, x, Q)
-    scale = 1.0 / np.sqrt(masses(model, x))
-    A = K * scale[:, None] * scale[None, :]
+    A, scale = mass_weighted(model, x, K)
     order, width = rod_order(model.block_of)
     try:
         if model.contact:  # pairs couple nodes far apart: not banded in rod order
@@ -786,9 +799,9 @@ def soft_factorization(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     from scipy.sparse import bmat, csc_matrix
     from scipy.sparse.linalg import LinearOperator, eigs, splu
 
-    root_mass = np.sqrt(masses(model, x))
-    K = stiffness_matrix(model, x, Q)
-    A = csc_matrix(K / root_mass[:, None] / root_mass[None, :])
+    A, scale = mass_weighted(model, x, stiffness_matrix(model, x, Q))
+    root_mass = 1.0 / scale
+    A = csc_matrix(A)
     N = A.shape[0]
     if N <= 4 * (soft_modes + 2):
         values, left, right = scipy.linalg.eig(A.toarray(), left=True, right=True)
