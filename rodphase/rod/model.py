@@ -331,6 +331,14 @@ def state_from(positions: np.ndarray, directors: np.ndarray, time: float = 0.0) 
     return RodState(time, x, np.zeros_like(x), Q, np.zeros((3, n)))
 
 
+def spread_twist(angle: float, elements: int) -> np.ndarray:
+    """(n,) the rotation [rad] of each element's frame about its d3 when a twist `angle`
+    [rad] is spread evenly along the rod, from the clamp at the start: element i (its centre
+    at (i + ½)/n of the length) turns by angle·(i + ½)/n. The straight branch's twist, and the
+    static predictor's guess of where a turned end's twist goes."""
+    return angle * (np.arange(elements) + 0.5) / elements
+
+
 def straight_state(rod: Rod, axis=(0.0, 0.0, 1.0), twist_turns: float = 0.0,
                    origin=(0.0, 0.0, 0.0)) -> RodState:
     """A straight rod from `origin` along `axis` at rest, d3 = axis, d1 turned uniformly by
@@ -343,7 +351,7 @@ def straight_state(rod: Rod, axis=(0.0, 0.0, 1.0), twist_turns: float = 0.0,
     d1 = helper - axis * (helper @ axis)
     d1 /= np.linalg.norm(d1)
     d2 = np.cross(axis, d1)
-    angles = 2 * np.pi * twist_turns * (np.arange(n) + 0.5) / n if twist_turns else np.zeros(n)
+    angles = spread_twist(2 * np.pi * twist_turns, n) if twist_turns else np.zeros(n)
     directors = np.empty((n, 3, 3))
     c, sn = np.cos(angles)[:, None], np.sin(angles)[:, None]
     directors[:, 0] = c * d1 + sn * d2

@@ -85,6 +85,7 @@ import scipy.linalg
 from . import kernel as k
 from ._jit import njit
 from .contact import DASHPOT_ROWS, add_body_forces, build_pairs, contact_forces_in, fold_forces
+from .model import spread_twist
 from .neo_hookean import N_WORK as N_WORK_NEO_HOOKEAN
 from .neo_hookean import clamp_couple_neo_hookean, internal_loads_neo_hookean
 
@@ -631,7 +632,7 @@ def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarr
 
 def twisted_further(x: np.ndarray, Q: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
     """(x, Q) with `angle` [rad] more twist spread evenly along the rod: element i's frame
-    turned about its own d3 by angle·(i + ½)/n, as model.straight_state spreads a twist;
+    turned about its own d3 by angle·(i + ½)/n (model.spread_twist, as straight_state);
     the nodes stay. The predictor of a step in the end rotation: a turned end's twist
     spreads along the whole rod, evenly on the straight branch (this is its equilibrium at
     the new rotation, tests/test_static.py) and nearly so on a coiled one (measured on Fig
@@ -639,7 +640,7 @@ def twisted_further(x: np.ndarray, Q: np.ndarray, angle: float) -> tuple[np.ndar
     with the frames left as they were)."""
     n = Q.shape[2]
     turn = np.zeros((n, 3))
-    turn[:, 2] = angle * (np.arange(n) + 0.5) / n
+    turn[:, 2] = spread_twist(angle, n)
     return displaced(x, Q, np.zeros((n + 1, 3)), turn, 1.0)
 
 
