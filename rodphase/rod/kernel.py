@@ -25,11 +25,11 @@ IR level), so that their machine code exists once. A callee compiled on its own 
 advance as a linkonce_odr copy that LLVM optimises again with advance; a process that compiles
 advance then binds the call to the callee's own copy, one that loads advance from numba's disk
 cache to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m
-on the reference scenes, tests/test_kernel_cache.py). Six functions that run at most at check
-steps (_guards, _shear_guard, _record, _settle_windows, _probe_distance, _start_probe) are
-compiled on their own instead (inline="never"): every inlined call site is IR that numba
-types and lowers again inside advance, and these six cost 12 s of its first compile (60 → 48 s,
-benchmarks/compile_time.py functions). Their results are the inlined ones to the bit, compiled
+on the reference scenes, tests/test_kernel_cache.py). The functions that run at most at check
+steps (_guards, _shear_guard, _record, _settle_windows, _stop_test with _probe_distance and
+_start_probe) are compiled on their own instead (inline="never"): every inlined call site is
+IR that numba types and lowers again inside advance, and the first six cost 12 s of its first
+compile (60 → 48 s, benchmarks/compile_time.py functions). Their results are the inlined ones to the bit, compiled
 fresh or loaded from the cache (positions, directors, history and snapshots of the reference
 scenes, benchmarks/reference_positions.py; tests/test_kernel_cache.py). Taken out the same way,
 _drift, rotated_frame, _kinetic_energy and the per-step loads were not: their last bits moved.
@@ -1095,6 +1095,62 @@ def _start_probe(x, probe_reference, probe_shape, probe_size):
             x[c, i] += probe_size * probe_shape[c, i]
 
 
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
+def _stop_test(x, t, at_rest, touching, settings, probe_shape, probe_norm2, probe_reference,
+               probe_running, probes, probes_left, window_sum, window_squares, window_count,
+               window_start, have_mean, settled):
+    """Does the hold end here, at a stable equilibrium? Called at check steps of a hold past
+    settings.equilibrium_after; at_rest says the rod passes the equilibrium test (settled
+    shape, or residual and kinetic energy below the tolerance).
+
+    Stability probe: a residual test cannot tell a stable equilibrium from an unstable one
+    (a straight twisted rod above its onset is in equilibrium too). A candidate is displaced
+    by settings.probe_size along probe_shape (its squared norm probe_norm2); it is stable if
+    the displacement along that shape decays below probe_return of the probe and the rod
+    passes the equilibrium test there, unstable if it grows beyond probe_leave probes (or any
+    node moves that many probe sizes away): the test then resumes and the next candidate is
+    probed in turn. Undecided, the hold runs to its time limit: `not_converged`.
+    Candidates in self-contact are accepted unprobed: damped dynamics from a generic state
+    ends on an unstable equilibrium only where symmetry keeps the unstable mode unexcited
+    (the straight rod, a flat loop) and no contact confines it; a coil or braid in contact
+    creeps by more than a probe's return distance while its shape is settled.
+
+    Starting a probe displaces x and restarts the settle windows (window_sum, window_squares
+    in place). Returns (accept, probe_running, probes, probes_left, window_count,
+    window_start, have_mean, settled)."""
+    accept = at_rest
+    if settings.probe:
+        accept = False
+        probe_size = settings.probe_size
+        if probe_running:
+            # how much of the probe is left (its projection on the probe shape; an error of
+            # the candidate along other directions, e.g. the axial stretch still settling to
+            # the tolerance, does not count) and how far the rod went
+            away, along = _probe_distance(x, probe_reference, probe_shape, probe_size,
+                                          probe_norm2)
+            leave = settings.probe_leave
+            if away > leave * probe_size or along > leave:
+                probe_running = False
+                probes_left += 1
+            elif at_rest and along < settings.probe_return:
+                accept = True
+        elif at_rest and touching > 0:
+            accept = True  # held by contact: see above
+        elif at_rest:
+            _start_probe(x, probe_reference, probe_shape, probe_size)
+            probe_running = True
+            probes += 1
+            # the shape test starts afresh: the windows before the probe say nothing
+            window_sum[:, :] = 0.0
+            window_squares[:, :] = 0.0
+            window_count = np.int64(0)
+            window_start = t
+            have_mean = np.bool_(False)
+            settled = np.bool_(False)
+    return (accept, probe_running, probes, probes_left, window_count, window_start, have_mean,
+            settled)
+
+
 @njit(cache=True, fastmath=_FASTMATH)
 def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out,
             neo_hookean=None):
@@ -1243,27 +1299,16 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     couple = np.empty(8)
     control_now = np.empty(N_TABLES)
     kinetic_before = 0.0
-    # Stability probe: a residual test cannot tell a stable equilibrium from an unstable one
-    # (a straight twisted rod above its onset is in equilibrium too). A candidate is displaced
-    # by probe_size along probe_shape; it is stable if the displacement along that shape
-    # decays below probe_return of the probe and the rod passes the equilibrium test there,
-    # unstable if it grows beyond probe_leave probes (or any node moves that many probe sizes
-    # away): the test then resumes and the next candidate is probed in turn. Undecided, the
-    # hold runs to its time limit: `not_converged`.
-    # Candidates in self-contact are accepted unprobed: damped dynamics from a generic state
-    # ends on an unstable equilibrium only where symmetry keeps the unstable mode unexcited
-    # (the straight rod, a flat loop) and no contact confines it; a coil or braid in
-    # contact creeps by more than a probe's return distance while its shape is settled.
-    probe_on = settings.probe and stop_at_equilibrium
-    probe_size = settings.probe_size
-    probe_running = False
+    # the stability probe of a hold's candidate equilibrium (_stop_test); typed as the
+    # window state above
+    probe_running = np.bool_(False)
     probe_reference = x.copy()
     probe_norm2 = 0.0
     for c in range(3):
         for i in range(n + 1):
             probe_norm2 += probe_shape[c, i] * probe_shape[c, i]
-    probes = 0
-    probes_left = 0
+    probes = np.int64(0)
+    probes_left = np.int64(0)
 
     info[D_SETTLED] = 0.0
     t = t_start
@@ -1436,34 +1481,11 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         accept = False
         if check and stop_at_equilibrium and t >= equilibrium_after:
             at_rest = settled or (residual < tolerance and kinetic < tolerance * tolerance)
-            accept = at_rest
-            if probe_on:
-                accept = False
-                if probe_running:
-                    # how much of the probe is left (its projection on the probe shape; an
-                    # error of the candidate along other directions, e.g. the axial stretch
-                    # still settling to the tolerance, does not count) and how far the rod went
-                    away, along = _probe_distance(x, probe_reference, probe_shape, probe_size,
-                                                  probe_norm2)
-                    leave = settings.probe_leave
-                    if away > leave * probe_size or along > leave:
-                        probe_running = False
-                        probes_left += 1
-                    elif at_rest and along < settings.probe_return:
-                        accept = True
-                elif at_rest and touching > 0:
-                    accept = True  # held by contact: see the note on the probe above
-                elif at_rest:
-                    _start_probe(x, probe_reference, probe_shape, probe_size)
-                    probe_running = True
-                    probes += 1
-                    # the shape test starts afresh: the windows before the probe say nothing
-                    window_sum[:, :] = 0.0
-                    window_squares[:, :] = 0.0
-                    window_count = np.int64(0)
-                    window_start = t
-                    have_mean = np.bool_(False)
-                    settled = np.bool_(False)
+            (accept, probe_running, probes, probes_left, window_count, window_start, have_mean,
+             settled) = _stop_test(x, t, at_rest, touching, settings, probe_shape, probe_norm2,
+                                   probe_reference, probe_running, probes, probes_left,
+                                   window_sum, window_squares, window_count, window_start,
+                                   have_mean, settled)
         if accept:
             status = S_EQUILIBRIUM
             info[D_SETTLED] = 0.0 if residual < tolerance and kinetic < tolerance * tolerance else 1.0
