@@ -206,11 +206,11 @@ def clamp_frame(reference, axis, angle):
 
 
 # The κ × c term of a clamp spring: which part of half_length·κ × c the element takes.
-# ENERGY_SHARE (½) is what the energy of the spring gives (see clamp_couple); KERNEL_SHARE
-# (1) is what rodphase/rod/kernel.py's _clamp_couple gives the element (its docstring: "its
-# share of the κ × τ term"). tests/test_naive_twin.py compares both and says which is which.
+# ENERGY_SHARE (½) is what the energy of the spring gives (see clamp_couple), and what
+# rodphase/rod/kernel.py's _clamp_couple gives the element since 2026-12-06; WHOLE_SHARE (1) is
+# what it gave before, first-order wrong (tests/test_naive_twin.py tells the two apart).
 ENERGY_SHARE = 0.5
-KERNEL_SHARE = 1.0
+WHOLE_SHARE = 1.0
 
 
 def clamp_couple(before, after, half_length, rest, stiffness, g3, share=ENERGY_SHARE):

@@ -359,8 +359,14 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
     """Couple of a clamp spring between frames A and B (rows d1 d2 d3) over half an element.
 
     κ = log(A Bᵀ)/half_length in the material frame; result[0:3] = g3·B(κ − κ0) (the couple),
-    result[3:6] = half_length·κ × couple (its share of the κ × τ term), result[6] the energy,
-    result[7] the cosine of the angle between the two frames.
+    result[3:6] = ½·half_length·κ × couple (the element's share of the κ × τ term), result[6]
+    the energy, result[7] the cosine of the angle between the two frames.
+
+    The share is half, as each side of an interior Voronoi domain takes ½·D0·κ × τ: it is what
+    the spring's energy gives, −∂E/∂δ for a turn δ of the element being ∓c + ½·half_length·κ × c
+    to first order in the clamp's angle (tests/test_naive_twin.py checks the misfit falls as
+    its square). Until 2026-12-06 the element took the whole (half_length·κ × c), first-order
+    wrong; the straight rod's onset moved by at most 1e-5 of itself with the fix (n = 40-160).
     """
     # R_ab = row a of A · row b of B, only the entries the log needs
     a0 = 0.5 * (_row_dot(A, 2, B, 1) - _row_dot(A, 1, B, 2))
@@ -379,9 +385,10 @@ def _clamp_couple(A, B, half_length, rest0, rest1, rest2, b0, b1, b2, g3, result
     result[0] = g3 * m0
     result[1] = g3 * m1
     result[2] = g3 * m2
-    result[3] = half_length * (k1 * result[2] - k2 * result[1])
-    result[4] = half_length * (k2 * result[0] - k0 * result[2])
-    result[5] = half_length * (k0 * result[1] - k1 * result[0])
+    lever = 0.5 * half_length
+    result[3] = lever * (k1 * result[2] - k2 * result[1])
+    result[4] = lever * (k2 * result[0] - k0 * result[2])
+    result[5] = lever * (k0 * result[1] - k1 * result[0])
 
 
 N_WORK = 13  # rows of the scratch array internal_loads needs, each of length n
