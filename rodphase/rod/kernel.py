@@ -33,6 +33,11 @@ compile (60 → 48 s, benchmarks/compile_time.py functions). Their results are t
 fresh or loaded from the cache (positions, directors, history and snapshots of the reference
 scenes, benchmarks/reference_positions.py; tests/test_kernel_cache.py). Taken out the same way,
 _drift, rotated_frame, _kinetic_energy and the per-step loads were not: their last bits moved.
+So is _work_arrays, which makes once per call the arrays of contact, the settle windows and
+the probe; the arrays the per-step loads and the kick work in stay allocated in advance
+itself: made in _work_arrays too, the recorded kinetic energy moved in its last bit (1e-17 J
+on the reference scenes; positions unchanged), LLVM optimising the loop that sums it
+otherwise once those arrays were not advance's own fresh allocations.
 """
 
 from collections import namedtuple
@@ -1158,6 +1163,42 @@ def _stop_test(x, t, at_rest, touching, settings, probe_shape, probe_norm2, prob
             settled)
 
 
+@njit(cache=True, fastmath=_FASTMATH, inline="never")
+def _work_arrays(x, rod, ends, settings):
+    """The arrays `advance` works in, made once per call (compiled on its own: it runs once).
+
+    Loads and strains: force (3, n+1), torque (3, n), dilatation, lengths and radius (n,),
+    energies (4,), work (rows the law's internal loads need, n). Inertia: inv_mass (n+1,),
+    inv_inertia (3, n); free_inv_mass, 1/m of the free nodes as the kick scales it (0 at a
+    node held in all three components: an implicit impulse then goes to its partner, which is
+    what a held node's infinite mass means), kick_inv_mass its per-step copy, axial_work for
+    _axial_damping. Contact's two-level Verlet list (_contact_loads): x_build, pairs, x_near,
+    radius_near, near; the contact loop's per-element buffers (segment vectors, 1/|u|²,
+    thinning lever) contact_work, fold_reach, fold_next; dashpots, the contact dashpots taken
+    implicitly after the kick (contact.apply_dashpots; none without settings.implicit_dashpot
+    and contact). The clamps' frame and couple buffers clamp (3, 3), couple (8,); the control
+    values control_now (N_TABLES,). The settled-shape test's window sums (_settle_windows:
+    node positions and d1 times the radius, (6, n+1) each) and the probe's reference state.
+    """
+    n = rod.rest_length.shape[0]
+    x_build = x.copy()
+    pairs = np.empty((2, 16 * n + 64), dtype=np.int64)
+    x_near = x.copy()
+    radius_near = rod.rest_radius.copy()
+    near = np.empty((2, pairs.shape[1]), dtype=np.int64)
+    contact_work = np.empty((5, n))
+    fold_reach = np.empty(settings.exclusion + 1)
+    fold_next = np.empty(n + 1, dtype=np.int64)
+    implicit_dashpot = settings.contact and settings.implicit_dashpot
+    dashpots = np.empty((DASHPOT_ROWS, near.shape[1] + 2 * (n + 1) if implicit_dashpot else 0))
+    window_sum = np.zeros((6, n + 1))
+    window_squares = np.zeros((6, n + 1))
+    window_mean = np.zeros((6, n + 1))
+    probe_reference = x.copy()
+    return (x_build, pairs, x_near, radius_near, near, contact_work, fold_reach, fold_next,
+            dashpots, window_sum, window_squares, window_mean, probe_reference)
+
+
 @njit(cache=True, fastmath=_FASTMATH)
 def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_shape, out,
             neo_hookean=None):
@@ -1191,12 +1232,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     bend_stiffness = rod.bend_stiffness
     rest_curvature = rod.rest_curvature
     rest_shear = rod.rest_shear
-    rest_radius = rod.rest_radius
     local_mask = rod.local_mask
     end_position = ends.end_position
-    table_t = tables.times
-    table_v = tables.values
-    table_n = tables.counts
     info = out.info
     n = rest_length.shape[0]
     dt = settings.dt
@@ -1210,8 +1247,6 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     history_every = max(settings.history_every, 1)
     check_every = max(settings.check_every, 1)
     stop_at_equilibrium = settings.stop_at_equilibrium
-    seg_first = ends.segment_first
-    seg_last = ends.segment_last
     axis = ends.axis.copy()
     force_dir = ends.force_direction.copy()
     gravity = ends.gravity.copy()
@@ -1224,65 +1259,31 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     decay_rotation[0], gain_rotation[0] = _drag_factors(settings.damping_rotation * dt)
     decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
     decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
-    penetration_limit = settings.penetration_limit
-    speed_limit = settings.speed_limit
     tolerance = settings.hold_tolerance
     force_scale = settings.force_scale
-    length_scale = settings.length_scale
     equilibrium_after = settings.equilibrium_after
     quadratic_drag = settings.quadratic_drag
     drag_radius = settings.drag_radius
     settle_window = settings.settle_window
-    settle_distance = settings.settle_distance
-    # Window means of node positions and of d1 (times the radius: a surface point), summed
-    # at every check; the shape has settled when two consecutive window means agree and
-    # within the window no point strayed from its mean (rms) by more than the same distance.
-    # Averaging is what lets a hold end under contact: there a standing vibration (~390 Hz,
-    # amplitude ~0.2 % of the radius, see docs/reproduction.md) keeps the residual above
-    # any useful tolerance although the shape no longer changes. The spread test keeps a
-    # slow, large oscillation whose period matches the window from passing as settled.
+    # the settled-shape test's windows (_settle_windows); typed int64 and bool from the start:
+    # a literal 0 or False here would have numba compile the callees that take them
+    # (_settle_windows, _record, _stop_test: not inlined) once more, for the literal types its
+    # type inference meets first
     settle_on = stop_at_equilibrium and settle_window > 0.0
-    window_sum = np.zeros((6, n + 1))
-    window_squares = np.zeros((6, n + 1))
-    window_mean = np.zeros((6, n + 1))
-    # typed int64 and bool from the start: a literal 0 or False here would have numba compile
-    # the callees that take them (_settle_windows, _record: not inlined) once more, for the
-    # literal types its type inference meets first
     window_count = np.int64(0)
     window_start = t_start
     have_mean = np.bool_(False)
     settle_motion = np.inf
     settled = np.bool_(False)
-
     force = np.zeros((3, n + 1))
     torque = np.zeros((3, n))
     dilatation = np.ones(n)
     lengths = rest_length.copy()
-    radius = rest_radius.copy()
+    radius = rod.rest_radius.copy()
     energies = np.zeros(4)
     work = np.zeros((max(N_WORK, N_WORK_NEO_HOOKEAN), n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
-    # the two-level Verlet list of contact (see _contact_loads)
-    x_build = x.copy()
-    pairs = np.empty((2, 16 * n + 64), dtype=np.int64)
-    n_pairs = 0
-    x_near = x.copy()
-    radius_near = rest_radius.copy()
-    near = np.empty((2, pairs.shape[1]), dtype=np.int64)
-    n_near = 0
-    # the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
-    contact_work = np.empty((5, n))
-    fold_reach = np.empty(settings.exclusion + 1)
-    fold_next = np.empty(n + 1, dtype=np.int64)
-    # Stiff dissipative terms taken implicitly after the kick (see _axial_damping and
-    # contact.apply_dashpots): the dashpots noted by the contact loop, and 1/m of the free
-    # nodes as the kick scales it (0 at a node held in all three components: the impulse
-    # then goes to its partner, which is what a held node's infinite mass means).
-    implicit_dashpot = contact_on and settings.implicit_dashpot
-    dashpots = np.empty((DASHPOT_ROWS, near.shape[1] + 2 * (n + 1) if implicit_dashpot else 0))
-    noted = 0
-    eta = settings.strain_rate_damping
     free_inv_mass = inv_mass.copy()
     for i in (0, n):
         held = ends.start_held if i == 0 else ends.end_held
@@ -1290,6 +1291,18 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             free_inv_mass[i] = 0.0
     kick_inv_mass = free_inv_mass.copy()
     axial_work = np.zeros((N_AXIAL_WORK, n))
+    clamp = np.empty((3, 3))
+    couple = np.empty(8)
+    control_now = np.empty(N_TABLES)
+    (x_build, pairs, x_near, radius_near, near, contact_work, fold_reach, fold_next, dashpots,
+     window_sum, window_squares, window_mean, probe_reference) = _work_arrays(x, rod, ends,
+                                                                                 settings)
+    implicit_dashpot = contact_on and settings.implicit_dashpot
+    noted = 0
+    eta = settings.strain_rate_damping
+    # contact's running state (_contact_loads)
+    n_pairs = 0
+    n_near = 0
     near_rebuilds = 0
     near_margin = settings.near_skin  # adapted at each rebuild of the near list
     near_age = 0  # steps since the near list was built
@@ -1302,14 +1315,9 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     contact_energy = 0.0
     residual = np.inf
     kinetic = np.inf
-    clamp = np.empty((3, 3))
-    couple = np.empty(8)
-    control_now = np.empty(N_TABLES)
     kinetic_before = 0.0
-    # the stability probe of a hold's candidate equilibrium (_stop_test); typed as the
-    # window state above
+    # the stability probe of a hold's candidate equilibrium (_stop_test)
     probe_running = np.bool_(False)
-    probe_reference = x.copy()
     probe_norm2 = 0.0
     for c in range(3):
         for i in range(n + 1):
@@ -1416,13 +1424,13 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 break
             if worst > max_penetration:
                 max_penetration = worst
-            if worst > penetration_limit:
+            if worst > settings.penetration_limit:
                 status = S_PENETRATION
                 info[D_WHERE] = worst_at
                 info[D_VALUE] = worst
                 break
         _external_loads(x, node_mass, r2, u.end_force, force_dir, gravity, u.local_pull,
-                        seg_first, seg_last, force)
+                        ends.segment_first, ends.segment_last, force)
 
         t_next = t + dt
         last = step == n_steps - 1
@@ -1455,13 +1463,13 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
 
         if check or record:
             status, res, kin = _guards(v, w, force, torque, ends, node_mass, inertia, rest_length,
-                                       r2, speed_limit, info)
+                                       r2, settings.speed_limit, info)
             if status == S_COMPLETED:
                 status = _shear_guard(x, Q, info)
             if status != S_COMPLETED:
                 break
             residual = res / force_scale
-            kinetic = kin / (force_scale * length_scale)
+            kinetic = kin / (force_scale * settings.length_scale)
             if record:
                 # the row's kinetic energy from the inlined sum, not from _guards' kin: the
                 # copy of _guards a process that loads advance from the cache calls sums it in
@@ -1481,7 +1489,7 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
 
         if settle_on and check:
             window_count, window_start, have_mean, settle_motion, settled = _settle_windows(
-                x, Q, t, drag_radius, settle_window, settle_distance, equilibrium_after,
+                x, Q, t, drag_radius, settle_window, settings.settle_distance, equilibrium_after,
                 window_sum, window_squares, window_mean, window_count, window_start, have_mean,
                 settle_motion, settled)
 
@@ -1510,7 +1518,8 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
             break
 
     if status == S_COMPLETED or status == S_EQUILIBRIUM or status == S_WAKE:
-        disp = table_value(table_t[T_END_DISPLACEMENT], table_v[T_END_DISPLACEMENT], table_n[T_END_DISPLACEMENT], t)
+        disp = table_value(tables.times[T_END_DISPLACEMENT], tables.values[T_END_DISPLACEMENT],
+                           tables.counts[T_END_DISPLACEMENT], t)
         _apply_held(x, v, ends, disp, 0.0)
     info[D_MAX_PENETRATION] = max_penetration
     info[D_REBUILDS] = rebuilds
