@@ -11,6 +11,7 @@ re-expressed here (the settings carry over, the code is written anew) for PyElas
     python studies/crosscheck_pyelastica.py reference plectoneme   # ~1 h on one core
     python studies/crosscheck_pyelastica.py rodphase solenoid      # minutes
     python studies/crosscheck_pyelastica.py compare solenoid       # table + docs/img/crosscheck_solenoid.png
+    python studies/crosscheck_pyelastica.py fig3 2.5577 1.0525     # a Fig 3 point from rest (minutes)
 
 `reference` keeps every 0.05 s frame in /tmp/crosscheck_raw_CASE.npz (MBs) and writes the
 reduced record tests/data/crosscheck_CASE.npz (0.5 s samples, final shape; < 300 kB).
@@ -535,6 +536,280 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
     return text
 
 
+# ------------------------------------------------------------------ Fig 3's corner in PyElastica
+# Issue #29 item 1: four Fig 3 points (Φa ≥ 2.49) trip rodphase's 45° shear guard; is the
+# runaway the model's (PyElastica runs away too) or rodphase's? `fig3 PHI EXT` runs, in
+# PyElastica 1.0, rodphase's twist_under_load protocol from rest (loading.quasi_static_below
+# = 0: PyElastica cannot start on the straight branch) with the Fig 3 settings. Every number
+# comes from the scene as rodphase builds it (config, units, scenes), so the two runs share
+# the rod, the load, the imperfection and the ramps by construction, not by copy.
+
+# The points that fail in the map of 2026-12-04 (sweep.sample_points of configs/fig3_paper.yaml,
+# full precision: Φa, L/L0), docs/reproduction.md "The triple point's failures"
+FIG3_FAILED = ((2.4905348515138033, 1.1090010169893503), (2.5258821224793793, 1.079950714390725),
+               (2.557734097540379, 1.0524589744396509), (2.5985506212338807, 1.1349544170312584))
+# configs/fig3_paper.yaml's run settings that matter here; refine_up_to and slow_down_to are
+# the runner's retries, not the model, and are left out (one resolution, one rate per run)
+FIG3_SETS = (("loading.force_multiple", None), ("loading.quasi_static_below", 0.0))
+BLOW_UP_SHEAR = 80.0  # degrees; rodphase's guard trips at 45, its test build ran to 89
+FIG3_ROW = 0.01  # s between history rows (the runaway e-folds in ~0.02 s)
+FIG3_FRAME = 0.1  # s between stored shapes (writhe, alignment)
+FIG3_CHECK = 0.001  # s between blow-up checks
+
+
+def fig3_config(phi: float, extension: float, elements: int):
+    from rodphase import config as C
+    from rodphase import scenes
+
+    sets = list(FIG3_SETS) + [("loading.extension", extension), ("loading.twist_density", phi),
+                              ("rod.elements", elements)]
+    return C.load_scene("twist_under_load", sets, registered=scenes.SCENES)
+
+
+def fig3_settings(phi: float, extension: float, elements: int) -> dict:
+    """The scene's settings at one Fig 3 point, in PyElastica's terms (SI), with what does
+    not carry over named in "unmapped"."""
+    from rodphase import config as C
+    from rodphase import scenes
+    from rodphase.rod.simulate import rotational_damping_auto, time_step
+
+    cfg = fig3_config(phi, extension, elements)
+    rod = scenes.rod_from(cfg)
+    problem = scenes.twist_under_load(cfg)
+    r, s, k = cfg.rod, cfg.solver, cfg.contact
+    l0 = r.length / elements
+    m_e = r.density * math.pi * r.radius**2 * l0
+    # rodphase's pair spring k = stiffness·E·l0 and dashpot 2ζ√(k·m_e) are per pair, as
+    # PyElastica's RodSelfContact(k, nu): the inverse of contact_mapping above
+    k_pair = k.stiffness * cfg.material.youngs_modulus * l0
+    turns = C.twist_turns(cfg)
+    return {
+        "phi": phi, "extension": extension, "n_elem": elements,
+        "length": r.length, "radius": r.radius, "density": r.density,
+        "E": cfg.material.youngs_modulus, "G": C.shear_modulus(cfg),
+        "force": C.load_force(cfg), "force_ramp_time": cfg.loading.force_ramp_time,
+        "turns": turns, "twist_rate": cfg.loading.twist_rate,
+        "twist_time": turns / cfg.loading.twist_rate, "hold": s.hold_max_time,
+        "damping": s.damping,
+        "rotational_damping": (rotational_damping_auto(rod) if s.rotational_damping == "auto"
+                               else s.rotational_damping),
+        "quadratic_drag": s.quadratic_drag,
+        "contact_k": k_pair, "contact_nu": 2.0 * k.damping_ratio * math.sqrt(k_pair * m_e),
+        # rodphase's own step with contact awake; PyElastica's position Verlet has the same
+        # explicit bound for the axial waves that set it
+        "dt_rodphase": time_step(problem)[0],
+        "imperfection": problem.rest_curvature,  # (n-1, 3) κ1, κ2 in the material frame
+        "unmapped": {
+            "strain_rate_damping": s.strain_rate_damping,  # Kelvin-Voigt axial, rodphase only
+            "contact.exclusion": k.exclusion,  # PyElastica: 0.8π current radii, fixed
+            "contact.fold": k.fold,  # no fold contact in PyElastica
+            "contact.dashpot": k.dashpot,  # PyElastica's dashpot is explicit
+            "ends.bodies": (cfg.ends.start_body, cfg.ends.end_body),  # nothing beyond the clamps
+            "hold_until": s.hold_until,  # PyElastica holds the full hold_max_time
+            "stability_probe": s.stability_probe,
+        },
+    }
+
+
+def _shear_and_stretch(x, Q, rest_lengths):
+    """(angle between d3 and the tangent of each element [deg], stretch of each element)."""
+    edge = np.diff(x, axis=1)
+    length = np.linalg.norm(edge, axis=0)
+    cos = np.einsum("ij,ij->j", Q[2], edge) / length
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), length / rest_lengths
+
+
+def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float | None = None,
+             hold: float | None = None, final_time: float | None = None) -> dict:
+    import elastica as ea
+
+    from rodphase.studytools import machine
+
+    c = fig3_settings(phi, extension, elements)
+    if hold is not None:
+        c["hold"] = hold
+    n = elements
+    dt = float(dt or c["dt_rodphase"])
+    ramp_t, twist_t, theta = c["force_ramp_time"], c["twist_time"], 2 * math.pi * c["turns"]
+    total = ramp_t + twist_t + c["hold"] if final_time is None else float(final_time)
+    steps = int(math.ceil(total / dt))
+
+    def rotation(t):
+        # the scene's end rotation: held at 0 while the load ramps in, then ramped at the
+        # twist rate, then held (rodphase's twist_stages/hold_stage)
+        return theta * min(max((t - ramp_t) / twist_t, 0.0), 1.0)
+
+    def spin(t):
+        return theta / twist_t if ramp_t <= t < ramp_t + twist_t else 0.0
+
+    class Sim(ea.BaseSystemCollection, ea.Constraints, ea.Contact, ea.Forcing,
+              ea.CallBacks, ea.Damping):
+        pass
+
+    sim = Sim()
+    y = np.array([0.0, 1.0, 0.0])  # PyElastica's axis, as in the examples (to_pyelastica)
+    rod = ea.CosseratRod.straight_rod(
+        n, np.zeros(3), y, np.array([0.0, 0.0, 1.0]), c["length"], c["radius"], c["density"],
+        youngs_modulus=c["E"], shear_modulus=c["G"])
+    # the scene's frozen-in rest curvature (seeded, RMS 1e-3/L0); PyElastica's d1 is the
+    # normal z, rodphase's x: the same material axis under the relabelling, so κ1, κ2 carry over
+    rod.rest_kappa[:] = c["imperfection"].T
+    sim.append(rod)
+
+    class SceneDamping(ea.DamperBase):
+        """rodphase's drag: velocities decay at `damping` [1/s], spins at
+        `rotational_damping` about d1, d2 and half of it about d3, uniformly (PyElastica's
+        physical protocol divides by each node's mass, doubling the rate at the end nodes),
+        then the implicit speed-proportional drag 1/(1 + c·|v|·dt), spin × radius for
+        rotation (kernel._kick)."""
+
+        def __init__(self, **kw):
+            super().__init__(**kw)
+            self.v = math.exp(-c["damping"] * dt)
+            w = c["rotational_damping"] * dt
+            self.w = np.exp(-np.array([w, w, 0.5 * w]))[:, None]
+
+        def dampen_rates(self, system, time):
+            v, w = system.velocity_collection, system.omega_collection
+            v *= self.v
+            w *= self.w
+            if c["quadratic_drag"] > 0:
+                v /= 1.0 + c["quadratic_drag"] * dt * np.linalg.norm(v, axis=0)
+                w /= 1.0 + c["quadratic_drag"] * dt * c["radius"] * np.linalg.norm(w, axis=0)
+
+    sim.dampen(rod).using(SceneDamping)
+
+    class SceneEnds(ea.ConstraintBase):
+        """twist_under_load's ends: start clamped (node and first element's frame); end node
+        held laterally and free along the axis under the load; last element's frame set to
+        the end rotation about the axis at every step (by value, so no damper eats twist)."""
+
+        def __init__(self, position_start, position_end, director_start, director_end, **kw):
+            super().__init__(**kw)
+            self.x0 = position_start.copy()
+            self.Q0 = director_start.copy()
+            self.Qn = director_end.copy()
+
+        def constrain_values(self, system, time):
+            system.position_collection[:, 0] = self.x0
+            system.director_collection[..., 0] = self.Q0
+            system.position_collection[0, -1] = 0.0
+            system.position_collection[2, -1] = 0.0
+            a = rotation(time)
+            # the end frame turned by a about the axis y (rows of Q are d1, d2, d3)
+            R = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0],
+                          [-math.sin(a), 0.0, math.cos(a)]])
+            system.director_collection[..., -1] = self.Qn @ R.T
+
+        def constrain_rates(self, system, time):
+            system.velocity_collection[:, 0] = 0.0
+            system.omega_collection[:, 0] = 0.0
+            system.velocity_collection[0, -1] = 0.0
+            system.velocity_collection[2, -1] = 0.0
+            system.omega_collection[:, -1] = (0.0, 0.0, spin(time))
+
+    sim.constrain(rod).using(SceneEnds, constrained_position_idx=(0, -1),
+                             constrained_director_idx=(0, -1))
+    # EndpointForces ramps as min(1, t/ramp): the scene's ramp(0, ramp_time, 0, F)
+    sim.add_forcing_to(rod).using(ea.EndpointForces, np.zeros(3), c["force"] * y,
+                                  ramp_up_time=ramp_t)
+    sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=c["contact_k"],
+                                               nu=c["contact_nu"])
+    sim.finalize()
+
+    rows = {k: [] for k in ("time", "end_rotation", "max_shear", "shear_element", "max_stretch",
+                            "kinetic", "kinetic_rotational", "end_axial")}
+    frames = {"time": [], "x": [], "d1": []}
+    # rows and frames are taken at checks, so their strides are whole numbers of checks
+    check_every = max(1, int(round(FIG3_CHECK / dt)))
+    row_every = check_every * max(1, int(round(FIG3_ROW / (check_every * dt))))
+    frame_every = check_every * max(1, int(round(FIG3_FRAME / (check_every * dt))))
+    blew_up = None
+    peak = {"shear": 0.0, "stretch": 0.0, "shear_time": 0.0}
+
+    def sample(t):
+        sh, st = _shear_and_stretch(rod.position_collection, rod.director_collection,
+                                    rod.rest_lengths)
+        return sh, st
+
+    stepper = ea.PositionVerlet()
+    t = np.float64(0.0)
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    print(f"fig3 Φa={phi:.4f} L/L0={extension:.4f}: n={n} dt={dt:.4g} (rodphase's "
+          f"{c['dt_rodphase']:.4g}) F={c['force']:.2f} N turns={c['turns']:.3f} "
+          f"to t={total:g} s ({steps} steps); {machine()['cpu']}", flush=True)
+    next_report = 1.0
+    for i in range(steps + 1):
+        if i % check_every == 0 or i == steps:
+            x = rod.position_collection
+            finite = np.all(np.isfinite(x)) and np.all(np.isfinite(rod.director_collection))
+            sh, st = sample(t) if finite else (np.array([np.nan]), np.array([np.nan]))
+            worst = float(np.nanmax(sh)) if finite else math.nan
+            if finite and worst > peak["shear"]:
+                peak.update(shear=worst, shear_time=float(t))
+            if finite:
+                peak["stretch"] = max(peak["stretch"], float(st.max()))
+            record = i % row_every == 0 or i == steps or not finite or worst > BLOW_UP_SHEAR
+            if record:
+                rows["time"].append(float(t))
+                rows["end_rotation"].append(rotation(t))
+                rows["max_shear"].append(worst)
+                rows["shear_element"].append(int(np.nanargmax(sh)) if finite else -1)
+                rows["max_stretch"].append(float(st.max()) if finite else math.nan)
+                # the two parts apart: a spin-shear chatter of elements shows in the second
+                spin_energy = float(rod.compute_rotational_energy()) if finite else math.nan
+                rows["kinetic"].append(float(rod.compute_translational_energy()) + spin_energy
+                                       if finite else math.nan)
+                rows["kinetic_rotational"].append(spin_energy)
+                rows["end_axial"].append(float(x[1, -1]))
+            if i % frame_every == 0 and finite:
+                frames["time"].append(float(t))
+                frames["x"].append(x.T.copy())
+                frames["d1"].append(rod.director_collection[0].T.copy())
+            if not finite or worst > BLOW_UP_SHEAR:
+                blew_up = {"time": float(t), "why": "non-finite state" if not finite else
+                           f"shear {worst:.1f} deg at element {int(np.nanargmax(sh))}"}
+                print(f"t={t:.4f} blew up: {blew_up['why']}", flush=True)
+                break
+            if t >= next_report - 0.5 * dt:
+                next_report += 1.0
+                print(f"t={t:6.2f} s cpu={time.process_time() - cpu0:7.1f} s  rot="
+                      f"{rotation(t) / (2 * math.pi):6.3f} turns  shear={worst:5.1f} deg "
+                      f"(el {rows['shear_element'][-1]})  stretch={st.max():.3f}  "
+                      f"KE={rows['kinetic'][-1]:.3g} J (spin {rows['kinetic_rotational'][-1]:.3g})  "
+                      f"end={x[1, -1]:.4f} m", flush=True)
+        if i == steps:
+            break
+        t = stepper.step(sim, t, dt)
+
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    from rodphase import classify
+    from rodphase.topology import topology_history
+
+    X, D = np.array(frames["x"]), np.array(frames["d1"])
+    lk, tw, wr = topology_history(X, D) if len(X) else (np.zeros(0),) * 3
+    al = classify.alignment(X[-1], c["radius"], rest_length=c["length"]) if len(X) else math.nan
+    info = {k: v for k, v in c.items() if k != "imperfection"}
+    info.update(dt=dt, steps=i, cpu_time=cpu, wall_time=wall, machine=machine(),
+                elastica="1.0.0", blew_up=blew_up, final_time=float(t),
+                peak_shear=peak["shear"], peak_shear_time=peak["shear_time"],
+                peak_stretch=peak["stretch"], alignment=al, phase=classify.phase(al),
+                final_writhe=float(wr[-1]) if len(wr) else math.nan)
+    np.savez_compressed(out, **{k: np.array(v) for k, v in rows.items()},
+                        frame_time=np.array(frames["time"]), x=X, d1=D, link=lk, twist=tw,
+                        writhe=wr, info=json.dumps(info, default=str))
+    late = np.array(rows["time"]) >= float(t) - 1.0
+    ke_late = np.array(rows["kinetic"])[late]
+    ending = (f"BLEW UP at t = {blew_up['time']:.3f} s ({blew_up['why']})" if blew_up
+              else f"ran to t = {t:.2f} s")
+    print(f"fig3 Φa={phi:.4f} L/L0={extension:.4f} n={n}: {ending}; "
+          f"peak shear {peak['shear']:.1f} deg (t = {peak['shear_time']:.2f} s), peak stretch "
+          f"{peak['stretch']:.3f}; last-second KE {ke_late.min():.3g}-{ke_late.max():.3g} J; "
+          f"Wr {info['final_writhe']:.2f}, alignment {al:.2f} ({classify.phase(al)}); "
+          f"cpu {cpu:.0f} s, {1e6 * cpu / max(i, 1):.0f} us/step -> {out}", flush=True)
+    return info
+
+
 # ------------------------------------------------------------------ command line
 
 
@@ -575,7 +850,20 @@ def main(argv=None) -> int:
     q.add_argument("case", choices=sorted(CASES))
     q.add_argument("--rodphase", type=Path, default=None)
     q.add_argument("--png", type=Path, default=None)
+    f = sub.add_parser("fig3", help="a Fig 3 point of twist_under_load, from rest, in PyElastica 1.0")
+    f.add_argument("phi", type=float, help="Φa = θ·a0/L0 (rest), as loading.twist_density")
+    f.add_argument("extension", type=float, help="L/L0, as loading.extension")
+    f.add_argument("--elements", type=int, default=80, help="rod.elements (Fig 3: 80, refined to 160)")
+    f.add_argument("--dt", type=float, default=None, help="s; default: rodphase's step at this n")
+    f.add_argument("--hold", type=float, default=None,
+                   help="s of hold after the twist (default: the scene's hold_max_time)")
+    f.add_argument("--final-time", type=float, default=None, help="stop early (s)")
+    f.add_argument("-o", "--out", type=Path, default=None)
     args = p.parse_args(argv)
+    if args.cmd == "fig3":
+        out = args.out or Path(f"/tmp/crosscheck_fig3_{args.phi:.3f}_{args.extension:.3f}_n{args.elements}.npz")
+        run_fig3(args.phi, args.extension, args.elements, out, args.dt, args.hold, args.final_time)
+        return 0
     if args.cmd == "rodphase":
         out = args.out or Path(f"/tmp/crosscheck_rodphase_{args.case}.npz")
         run_rodphase(args.case, args.contact, args.dt, args.twist, args.kick,

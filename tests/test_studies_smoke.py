@@ -230,6 +230,24 @@ def test_crosscheck_reference_runs_a_moment_of_pyelastica(tmp_path):
     assert np.load(tmp_path / "reduced.npz")["time"].size >= 1
 
 
+def test_crosscheck_fig3_runs_a_moment_of_a_failed_point_in_pyelastica(tmp_path):
+    # `fig3 PHI EXT`: a Fig 3 point from rest in PyElastica 1.0 (minutes); here the first
+    # 0.02 s of the load ramp at the coarsest map resolution
+    pytest.importorskip("elastica", reason="PyElastica is the bench extra (make bench-extra)")
+    cc = study("crosscheck_pyelastica")
+    phi, extension = cc.FIG3_FAILED[2]
+    out = tmp_path / "fig3.npz"
+    assert cc.main(["fig3", str(phi), str(extension), "--elements", "20", "--final-time", "0.02",
+                    "-o", str(out)]) == 0
+    r = np.load(out)
+    info = json.loads(str(r["info"]))
+    assert info["blew_up"] is None and r["time"][-1] == pytest.approx(0.02, abs=info["dt"])
+    # the scene's load for L/L0 = e, F = E·A0·(1 − 1/e), and its twist Φa·L0/a0 in turns
+    assert info["force"] == pytest.approx(1e6 * np.pi * 0.025**2 * (1 - 1 / extension))
+    assert info["turns"] == pytest.approx(phi / 0.025 / (2 * np.pi))
+    assert np.all(r["max_shear"] < 1.0) and np.all(r["max_stretch"] < 1.01)
+
+
 # ------------------------------------------------------------------ in their own process
 
 def test_stability_map_bisects_a_few_rods(tmp_path, doc):
