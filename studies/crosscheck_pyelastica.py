@@ -587,6 +587,10 @@ def fig3_settings(phi: float, extension: float, elements: int) -> dict:
         "phi": phi, "extension": extension, "n_elem": elements,
         "length": r.length, "radius": r.radius, "density": r.density,
         "E": cfg.material.youngs_modulus, "G": C.shear_modulus(cfg),
+        # rodphase's shear stiffness 4GA/3 (model.Rod.shear_stiffness); PyElastica 1.0's
+        # straight_rod uses 27/28·G·A (Kaneko's factor for ν = 1/2), 1.38 times softer
+        "shear_stiffness": rod.shear_stiffness,
+        "shear_stiffness_pyelastica": 27.0 / 28.0 * C.shear_modulus(cfg) * math.pi * r.radius**2,
         "force": C.load_force(cfg), "force_ramp_time": cfg.loading.force_ramp_time,
         "turns": turns, "twist_rate": cfg.loading.twist_rate,
         "twist_time": turns / cfg.loading.twist_rate, "hold": s.hold_max_time,
@@ -620,12 +624,14 @@ def _shear_and_stretch(x, Q, rest_lengths):
 
 
 def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float | None = None,
-             hold: float | None = None, final_time: float | None = None) -> dict:
+             hold: float | None = None, final_time: float | None = None,
+             shear: str = "rodphase") -> dict:
     import elastica as ea
 
     from rodphase.studytools import machine
 
     c = fig3_settings(phi, extension, elements)
+    c["shear"] = shear
     if hold is not None:
         c["hold"] = hold
     n = elements
@@ -654,6 +660,11 @@ def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float |
     # the scene's frozen-in rest curvature (seeded, RMS 1e-3/L0); PyElastica's d1 is the
     # normal z, rodphase's x: the same material axis under the relabelling, so κ1, κ2 carry over
     rod.rest_kappa[:] = c["imperfection"].T
+    if shear == "rodphase":
+        # the same rod: rodphase's 4GA/3 in both shear directions (axial EA, bend EI and
+        # twist 2GI are the same in both codes already)
+        rod.shear_matrix[0, 0, :] = c["shear_stiffness"]
+        rod.shear_matrix[1, 1, :] = c["shear_stiffness"]
     sim.append(rod)
 
     class SceneDamping(ea.DamperBase):
@@ -719,7 +730,8 @@ def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float |
 
     rows = {k: [] for k in ("time", "end_rotation", "max_shear", "shear_element", "max_stretch",
                             "kinetic", "kinetic_rotational", "end_axial")}
-    frames = {"time": [], "x": [], "d1": []}
+    # per-element shear and stretch with each shape: where along the rod the shear sits
+    frames = {"time": [], "x": [], "d1": [], "shear": [], "stretch": []}
     # rows and frames are taken at checks, so their strides are whole numbers of checks
     check_every = max(1, int(round(FIG3_CHECK / dt)))
     row_every = check_every * max(1, int(round(FIG3_ROW / (check_every * dt))))
@@ -736,7 +748,8 @@ def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float |
     t = np.float64(0.0)
     cpu0, wall0 = time.process_time(), time.perf_counter()
     print(f"fig3 Φa={phi:.4f} L/L0={extension:.4f}: n={n} dt={dt:.4g} (rodphase's "
-          f"{c['dt_rodphase']:.4g}) F={c['force']:.2f} N turns={c['turns']:.3f} "
+          f"{c['dt_rodphase']:.4g}) F={c['force']:.2f} N turns={c['turns']:.3f} shear S="
+          f"{rod.shear_matrix[0, 0, 0]:.1f} N ({shear}) "
           f"to t={total:g} s ({steps} steps); {machine()['cpu']}", flush=True)
     next_report = 1.0
     for i in range(steps + 1):
@@ -766,6 +779,8 @@ def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float |
                 frames["time"].append(float(t))
                 frames["x"].append(x.T.copy())
                 frames["d1"].append(rod.director_collection[0].T.copy())
+                frames["shear"].append(sh)
+                frames["stretch"].append(st)
             if not finite or worst > BLOW_UP_SHEAR:
                 blew_up = {"time": float(t), "why": "non-finite state" if not finite else
                            f"shear {worst:.1f} deg at element {int(np.nanargmax(sh))}"}
@@ -796,7 +811,9 @@ def run_fig3(phi: float, extension: float, elements: int, out: Path, dt: float |
                 peak_stretch=peak["stretch"], alignment=al, phase=classify.phase(al),
                 final_writhe=float(wr[-1]) if len(wr) else math.nan)
     np.savez_compressed(out, **{k: np.array(v) for k, v in rows.items()},
-                        frame_time=np.array(frames["time"]), x=X, d1=D, link=lk, twist=tw,
+                        frame_time=np.array(frames["time"]), x=X, d1=D,
+                        frame_shear=np.array(frames["shear"]),
+                        frame_stretch=np.array(frames["stretch"]), link=lk, twist=tw,
                         writhe=wr, info=json.dumps(info, default=str))
     late = np.array(rows["time"]) >= float(t) - 1.0
     ke_late = np.array(rows["kinetic"])[late]
@@ -858,11 +875,15 @@ def main(argv=None) -> int:
     f.add_argument("--hold", type=float, default=None,
                    help="s of hold after the twist (default: the scene's hold_max_time)")
     f.add_argument("--final-time", type=float, default=None, help="stop early (s)")
+    f.add_argument("--shear", choices=("rodphase", "pyelastica"), default="rodphase",
+                   help="rodphase: its shear stiffness 4GA/3 (the same rod); pyelastica: "
+                        "PyElastica 1.0's own 27/28·G·A")
     f.add_argument("-o", "--out", type=Path, default=None)
     args = p.parse_args(argv)
     if args.cmd == "fig3":
         out = args.out or Path(f"/tmp/crosscheck_fig3_{args.phi:.3f}_{args.extension:.3f}_n{args.elements}.npz")
-        run_fig3(args.phi, args.extension, args.elements, out, args.dt, args.hold, args.final_time)
+        run_fig3(args.phi, args.extension, args.elements, out, args.dt, args.hold, args.final_time,
+                 args.shear)
         return 0
     if args.cmd == "rodphase":
         out = args.out or Path(f"/tmp/crosscheck_rodphase_{args.case}.npz")

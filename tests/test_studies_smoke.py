@@ -245,6 +245,9 @@ def test_crosscheck_fig3_runs_a_moment_of_a_failed_point_in_pyelastica(tmp_path)
     # the scene's load for L/L0 = e, F = E·A0·(1 − 1/e), and its twist Φa·L0/a0 in turns
     assert info["force"] == pytest.approx(1e6 * np.pi * 0.025**2 * (1 - 1 / extension))
     assert info["turns"] == pytest.approx(phi / 0.025 / (2 * np.pi))
+    # the same rod: rodphase's shear stiffness 4GA/3, not PyElastica's 27/28·G·A
+    assert info["shear"] == "rodphase"
+    assert info["shear_stiffness"] == pytest.approx(4 / 3 * 2e6 / 3 * np.pi * 0.025**2)
     assert np.all(r["max_shear"] < 1.0) and np.all(r["max_stretch"] < 1.01)
 
 
