@@ -28,16 +28,17 @@ cache to the linked copy, and with fastmath the two differed in the last bits (u
 on the reference scenes, tests/test_kernel_cache.py). The functions that run at most at check
 steps (_guards, _shear_guard, _record, _settle_windows, _stop_test with _probe_distance and
 _start_probe) are compiled on their own instead (inline="never"): every inlined call site is
-IR that numba types and lowers again inside advance, and the first six cost 12 s of its first
-compile (60 → 48 s, benchmarks/compile_time.py functions). Their results are the inlined ones to the bit, compiled
-fresh or loaded from the cache (positions, directors, history and snapshots of the reference
-scenes, benchmarks/reference_positions.py; tests/test_kernel_cache.py). Taken out the same way,
-_drift, rotated_frame, _kinetic_energy and the per-step loads were not: their last bits moved.
-So is _work_arrays, which makes once per call the arrays of contact, the settle windows and
-the probe; the arrays the per-step loads and the kick work in stay allocated in advance
-itself: made in _work_arrays too, the recorded kinetic energy moved in its last bit (1e-17 J
-on the reference scenes; positions unchanged), LLVM optimising the loop that sums it
-otherwise once those arrays were not advance's own fresh allocations.
+IR that numba types and lowers again inside advance (all but _stop_test, inlined, cost 12 s
+of its first compile: 60 → 48 s, benchmarks/compile_time.py functions). Their results are
+the inlined ones to the bit, compiled fresh or loaded from the cache (positions, directors,
+history and snapshots of the reference scenes, benchmarks/reference_positions.py;
+tests/test_kernel_cache.py). Taken out the same way, _drift, rotated_frame, _kinetic_energy
+and the per-step loads were not: their last bits moved. _work_arrays, which runs once per
+call, is compiled on its own too; it makes the arrays of contact, the settle windows and
+the probe. The arrays the per-step loads and the kick work in stay allocated in advance
+itself: made in _work_arrays, the recorded kinetic energy moved in its last bit (1e-17 J on
+the reference scenes; positions unchanged), LLVM optimising the loop that sums it otherwise
+once those arrays were not advance's own fresh allocations.
 """
 
 from collections import namedtuple
