@@ -1034,6 +1034,10 @@ def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equili
     """Window means of node positions and of d1 (times the radius: a surface point), summed
     at every check; the shape has settled when two consecutive window means agree and within
     the window no point strayed from its mean (rms) by more than the same distance.
+    Averaging is what lets a hold end under contact: there a standing vibration (~390 Hz,
+    amplitude ~0.2 % of the radius, see docs/reproduction.md) keeps the residual above any
+    useful tolerance although the shape no longer changes. The spread test keeps a slow,
+    large oscillation whose period matches the window from passing as settled.
     Returns (window_count, window_start, have_mean, settle_motion, settled)."""
     n = Q.shape[2]
     if t < equilibrium_after:
@@ -1166,20 +1170,14 @@ def _stop_test(x, t, at_rest, touching, settings, probe_shape, probe_norm2, prob
 
 @njit(cache=True, fastmath=_FASTMATH, inline="never")
 def _work_arrays(x, rod, ends, settings):
-    """The arrays `advance` works in, made once per call (compiled on its own: it runs once).
-
-    Loads and strains: force (3, n+1), torque (3, n), dilatation, lengths and radius (n,),
-    energies (4,), work (rows the law's internal loads need, n). Inertia: inv_mass (n+1,),
-    inv_inertia (3, n); free_inv_mass, 1/m of the free nodes as the kick scales it (0 at a
-    node held in all three components: an implicit impulse then goes to its partner, which is
-    what a held node's infinite mass means), kick_inv_mass its per-step copy, axial_work for
-    _axial_damping. Contact's two-level Verlet list (_contact_loads): x_build, pairs, x_near,
-    radius_near, near; the contact loop's per-element buffers (segment vectors, 1/|u|²,
-    thinning lever) contact_work, fold_reach, fold_next; dashpots, the contact dashpots taken
-    implicitly after the kick (contact.apply_dashpots; none without settings.implicit_dashpot
-    and contact). The clamps' frame and couple buffers clamp (3, 3), couple (8,); the control
-    values control_now (N_TABLES,). The settled-shape test's window sums (_settle_windows:
-    node positions and d1 times the radius, (6, n+1) each) and the probe's reference state.
+    """Arrays `advance` works in, made once per call (compiled on its own: it runs once):
+    contact's two-level Verlet list (_contact_loads) x_build, pairs, x_near, radius_near,
+    near; the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
+    contact_work, fold_reach, fold_next; dashpots, the contact dashpots taken implicitly after
+    the kick (contact.apply_dashpots; none without settings.implicit_dashpot and contact); the
+    settled-shape test's window sums (_settle_windows: node positions and d1 times the radius,
+    (6, n+1) each); the probe's reference state. The arrays of the per-step loads and the
+    kick are made in advance itself (the module docstring says why).
     """
     n = rod.rest_length.shape[0]
     x_build = x.copy()
@@ -1285,6 +1283,10 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     work = np.zeros((max(N_WORK, N_WORK_NEO_HOOKEAN), n))
     inv_mass = 1.0 / node_mass
     inv_inertia = 1.0 / inertia
+    # 1/m of the free nodes as the kick scales it, for the stiff dissipative terms taken
+    # implicitly after the kick (_axial_damping, contact.apply_dashpots): 0 at a node held in
+    # all three components, whose impulse then goes to its partner (a held node's infinite
+    # mass)
     free_inv_mass = inv_mass.copy()
     for i in (0, n):
         held = ends.start_held if i == 0 else ends.end_held
