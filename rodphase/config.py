@@ -291,6 +291,8 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "exclusion": _engine("Contact", "exclusion"),
         # nodes inside the exclusion kept from folding tighter than the rod (no self-passage)
         "fold": _engine("Contact", "fold"),
+        # the contact spring's pull along elements whose radius thins with stretch
+        "thinning_force": _engine("Contact", "thinning_force"),
         # the step of a rod without contact until the rod first touches itself
         "sleep": _engine("Contact", "sleep"),
         "skin": _engine("Contact", "skin"),
@@ -820,6 +822,8 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     # a run stopped while an end turns, run again at half the twist rate (issue #29): off by
     # default, so no hash moved; the Fig 3 configs turn it on
     ("solver", "slow_down_to"): 0.0,
+    # the contact thinning force made optional (issue #29): on by default, so no hash moved
+    ("contact", "thinning_force"): True,
 }
 
 

@@ -36,7 +36,8 @@ def contact_from(cfg) -> Contact:
     return Contact(enabled=cfg.physics.self_contact, stiffness=c.stiffness,
                    damping_ratio=c.damping_ratio, dashpot=c.dashpot,
                    friction=cfg.physics.friction,
-                   exclusion=c.exclusion, fold=c.fold, sleep=c.sleep,
+                   exclusion=c.exclusion, fold=c.fold, thinning_force=c.thinning_force,
+                   sleep=c.sleep,
                    skin=c.skin, near_skin=c.near_skin, penetration_limit=c.penetration_limit)
 
 

@@ -551,3 +551,13 @@ def test_a_control_has_the_same_bounds_as_a_scene_key_and_as_a_sweep_axis(key, b
         assert f"{bounds[0]:g} " in error.allowed and f"<= {bounds[1]:g}" in error.allowed
     if key != "force_multiple":  # (1000 F_C would stretch this rod without bound)
         C.validate_scene(with_(SCENE, f"loading.{key}", bounds[1]), SCENES)  # the bound is in
+
+
+def test_contact_thinning_force_is_a_checked_key_that_moves_no_hash_at_its_default():
+    on = C.load_scene("twist_under_load", [], SCENES)
+    assert on.contact.thinning_force is True
+    explicit = C.load_scene("twist_under_load", [("contact.thinning_force", True)], SCENES)
+    off = C.load_scene("twist_under_load", [("contact.thinning_force", False)], SCENES)
+    assert C.config_hash(explicit) == C.config_hash(on) != C.config_hash(off)
+    with pytest.raises(C.ConfigError, match="contact.thinning_force"):
+        C.load_scene("twist_under_load", [("contact.thinning_force", "sometimes")], SCENES)

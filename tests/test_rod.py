@@ -734,3 +734,32 @@ def test_a_fixed_dt_above_the_bound_is_named_not_blamed_on_resolution():
     assert result.status == "unstable"
     assert result.diagnostics["guard"] == "time_step" and "solver.dt" in result.message
     assert "refined_from" not in result.diagnostics and result.diagnostics["elements"] == 16
+
+
+def test_the_contact_thinning_force_is_the_only_axial_contact_load_between_parallel_strands():
+    # A hairpin whose two straight legs overlap by 0.01 m (bend radius 0.8 a): the pair
+    # springs between the parallel legs push along their common normal, across the legs, so
+    # on the legs' nodes any load along the legs is the thinning force, k·δ·a/(2l) along each
+    # element of an incompressible rod (Contact.thinning_force; issue #29). Off, none is left
+    # (round-off of the 8.7 kN normal loads: 1e-11 N measured); on, several newtons (5.6 N
+    # measured at the middle of the legs, where neighbouring elements' pulls mostly cancel).
+    # Through static_model_of, the path the kernel's settings take, and in a short run.
+    from rodphase.rod import static
+    from rodphase.rod.simulate import static_model_of
+
+    rod = Rod(length=1.0, radius=0.025, elements=40)
+    state = hairpin_state(rod, 0.8 * rod.radius)
+    straight = (rod.length - math.pi * 0.8 * rod.radius) / 2
+    legs = (state.x[2] > 0.1) & (state.x[2] < straight - 0.05)
+    axial, ends = {}, {}
+    for flag in (True, False):
+        problem = Problem(rod=rod, state=state, stages=(Stage(2e-4),),
+                          contact=Contact(enabled=True, thinning_force=flag, sleep=False))
+        model = static_model_of(problem, contact=True)
+        assert model.thinning_force is flag
+        force = static.contact_force(model, np.ascontiguousarray(state.x))
+        assert np.abs(force[0][legs]).max() > 1e3  # the legs pressed apart
+        axial[flag] = np.abs(force[2][legs]).max()
+        ends[flag] = simulate(problem).positions
+    assert axial[False] < 1e-8 and axial[True] > 1.0, axial
+    assert not np.array_equal(ends[True], ends[False])  # the kernel takes the setting too

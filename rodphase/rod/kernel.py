@@ -114,6 +114,7 @@ Settings = namedtuple("Settings", [
     "contact",  # bool: self-contact on
     "exclusion",  # int: elements closer than this along the rod never touch
     "fold",  # bool: nodes inside the exclusion kept from folding tighter than the rod (fold_forces)
+    "thinning_force",  # bool: the contact spring's pull along thinning elements (contact_forces_in)
     "sleep",  # bool, with contact off: contact computed but not applied; S_WAKE at a touch
     "implicit_dashpot",  # bool: contact dashpots as backward-Euler impulses after the kick
     "friction",  # Coulomb coefficient
@@ -756,7 +757,8 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
     if n_near > 0:  # a rod far from itself (e.g. straight) skips the per-element pass too
         touching, worst, worst_at, contact_energy, noted = contact_forces_in(
             x, v, radius, near, n_near, contact_k, contact_c, f_stiff, settings.friction,
-            settings.slip_speed, 1.0 if incompressible else 0.0, force, dashpots, implicit,
+            settings.slip_speed, 1.0 if incompressible and settings.thinning_force else 0.0,
+            force, dashpots, implicit,
             contact_work[:3], contact_work[3], contact_work[4])
     if settings.fold:
         fold_touching, fold_worst, fold_at, fold_energy = fold_forces(

@@ -210,6 +210,13 @@ class Contact:
     # the rest arc between them (contact.fold_forces): a loop pulled tighter than the rod
     # cannot close through itself, so link is not lost by a self-passage no filament makes
     fold: bool = setting(True)
+    # The pair spring's pull along each element in contact, k·δ·a/(2l): the overlap δ depends
+    # on the radii, a0/√e for an incompressible rod, so this is the rest of the gradient of the
+    # contact energy ½kδ² (with it, contact does no work on a stretching rod). PyElastica's
+    # contact, the paper's, has none; off, rodphase's tight braids stretch as PyElastica's
+    # (docs/reproduction.md, "The four against the authors' code"). Only an incompressible rod
+    # thins: for any other it changes nothing.
+    thinning_force: bool = setting(True)
     # Contact sleeps until the rod first touches itself (a pair, a fold) or an end body: until
     # then the run takes the larger time step of a rod without contact, and from the step of
     # that touch on it is awake, with its own step, for the rest of the run (simulate.py)

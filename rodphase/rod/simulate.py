@@ -136,6 +136,7 @@ def _kernel_inputs(problem: Problem, ends: Ends, dt: float, history_every: int,
         contact=bool(contact.enabled and not asleep),
         implicit_dashpot=contact.dashpot == "implicit",
         fold=bool(contact.fold),
+        thinning_force=bool(contact.thinning_force),
         sleep=bool(asleep),
         exclusion=int(max(1, math.ceil(contact.exclusion * rod.radius * grown / rod.element_length))),
         friction=float(contact.friction),
@@ -189,7 +190,7 @@ def static_model_of(problem: Problem, controls: Controls | None = None, time: fl
                                neo_hookean=problem.rod.law != "paper",
                                contact=contact and problem.contact.enabled,
                                fold=settings.fold, exclusion=settings.exclusion,
-                               skin=settings.skin)
+                               skin=settings.skin, thinning_force=settings.thinning_force)
 
 
 def clamp_frames(state: RodState) -> tuple[np.ndarray, np.ndarray]:

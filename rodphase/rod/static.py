@@ -168,13 +168,15 @@ def _gather(force, torque, free, out):
 
 
 @njit(cache=True)
-def contact_loads(x, rod, ends, now, incompressible, fold, exclusion, pairs, n_pairs, force):
+def contact_loads(x, rod, ends, now, incompressible, thinning_force, fold, exclusion, pairs,
+                  n_pairs, force):
     """Add the self-contact forces of the state x at rest to force (3, n+1): the kernel's
     own pair springs (contact.contact_forces_in, at v = 0, where its dashpot and friction
     vanish) over the candidate `pairs`, its fold springs (contact.fold_forces) if `fold`,
     and the end bodies' (contact.add_body_forces) where `ends` has them, as kernel._contact_
     loads composes them. The radii follow the element lengths as the kernel's do (a0/√e when
-    incompressible). Returns the number of touching pairs, folds and nodes."""
+    incompressible), and the pair springs pull along thinning elements if `thinning_force`
+    (Contact.thinning_force). Returns the number of touching pairs, folds and nodes."""
     n = x.shape[1] - 1
     lengths = np.empty(n)
     dilatation = np.empty(n)
@@ -189,7 +191,8 @@ def contact_loads(x, rod, ends, now, incompressible, fold, exclusion, pairs, n_p
     at_rest = np.zeros((3, n + 1))
     touching, _, _, _, _ = contact_forces_in(
         x, at_rest, radius, pairs, n_pairs, rod.contact_k, rod.contact_c, now[k.T_STIFFNESS],
-        0.0, 1.0, 1.0 if incompressible else 0.0, force, np.empty((DASHPOT_ROWS, 0)), False,
+        0.0, 1.0, 1.0 if incompressible and thinning_force else 0.0, force,
+        np.empty((DASHPOT_ROWS, 0)), False,
         np.empty((3, n)), np.empty(n), np.empty(n))
     if fold:
         folded, _, _, _ = fold_forces(x, radius, lengths, rod.rest_length, exclusion,
@@ -307,6 +310,7 @@ class StaticModel:
     fold: bool = False
     exclusion: int = 1
     skin: float = 0.0
+    thinning_force: bool = True  # the pair springs' pull along thinning elements
 
     @property
     def unknowns(self) -> int:
@@ -319,7 +323,8 @@ class StaticModel:
 
 def static_model(rod: k.RodProperties, ends: k.Boundary, now: np.ndarray, *,
                  incompressible: bool, neo_hookean: bool, contact: bool = False,
-                 fold: bool = False, exclusion: int = 1, skin: float = 0.0) -> StaticModel:
+                 fold: bool = False, exclusion: int = 1, skin: float = 0.0,
+                 thinning_force: bool = True) -> StaticModel:
     """The unknowns of a rod held by `ends`: every node component not held, every frame.
     With `contact`, the loads include self-contact (see StaticModel)."""
     n = rod.rest_length.shape[0]
@@ -334,7 +339,7 @@ def static_model(rod: k.RodProperties, ends: k.Boundary, now: np.ndarray, *,
     return StaticModel(rod, ends, bool(incompressible), bool(neo_hookean),
                        np.asarray(now, dtype=float), free, block_of,
                        float(np.mean(rod.rest_length)), bool(contact), bool(fold),
-                       int(exclusion), float(skin))
+                       int(exclusion), float(skin), bool(thinning_force))
 
 
 def loads(model: StaticModel, x: np.ndarray, Q: np.ndarray,
@@ -376,8 +381,9 @@ def contact_force(model: StaticModel, x: np.ndarray,
     force = np.zeros_like(x)
     if model.contact:
         pairs = candidate_pairs(model, x) if pairs is None else pairs
-        contact_loads(x, model.rod, model.ends, model.now, model.incompressible, model.fold,
-                      model.exclusion, pairs, pairs.shape[1], force)
+        contact_loads(x, model.rod, model.ends, model.now, model.incompressible,
+                      model.thinning_force, model.fold, model.exclusion, pairs, pairs.shape[1],
+                      force)
     return force
 
 
