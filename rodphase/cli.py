@@ -139,7 +139,8 @@ def run(scene, output, sets, force):
     # the output is opened (locked, its config checked) before simulating: a run that cannot
     # be written is refused before it costs anything
     with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
-                    version=__version__, kind="run", replace=force) as store:
+                    version=__version__, kind="run", replace=force,
+                    earlier=C.earlier_hashes(cfg)) as store:
         from .runner import compile_kernel, cpu_seconds
 
         click.echo("Compiling the kernel (once; numba caches it on disk) ...")

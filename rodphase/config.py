@@ -838,9 +838,32 @@ def _hash_view(part: dict) -> dict:
     return out
 
 
-def config_hash(*parts: Frozen) -> str:
-    blob = json.dumps([_hash_view(p.plain()) for p in parts], sort_keys=True, default=str)
+# The engine's physics revision, raised by a change that moves results with no config key to
+# say so (a law's bug fixed): a store is resumed only by the revision that wrote it, since its
+# runs and the new ones would be of other physics. From 2 on the revision is part of the
+# config hash; 1, the revision of every store written before it existed, leaves the hash as
+# it was. ENGINE_REVISIONS says what each one changed (for the message that refuses a resume).
+ENGINE_REVISION = 2
+ENGINE_REVISIONS = {
+    1: "before the engine revision was recorded",
+    2: "the clamp spring's share of its κ × c term halved, as its energy gives (2026-12-06)",
+}
+
+
+def config_hash(*parts: Frozen, revision: int = ENGINE_REVISION) -> str:
+    """The hash a store keeps of the config that made it, and of the engine's `revision`
+    (ENGINE_REVISION): a store is resumed only by a config and an engine of the same hash."""
+    views = [_hash_view(p.plain()) for p in parts]
+    if revision != 1:
+        views.append({"engine_revision": int(revision)})
+    blob = json.dumps(views, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def earlier_hashes(*parts: Frozen) -> dict[str, int]:
+    """{hash: revision} of the same config under each earlier engine revision: what a store
+    written by an older rodphase holds."""
+    return {config_hash(*parts, revision=r): r for r in ENGINE_REVISIONS if r != ENGINE_REVISION}
 
 
 def to_yaml(**parts: Frozen) -> str:

@@ -951,12 +951,14 @@ def _is_empty_hdf5(path: Path) -> bool:
 
 
 def open_store(path, *, config_text: str, config_hash: str, version: str, kind: str,
-               replace: bool = False) -> Store:
+               replace: bool = False, earlier: dict[str, int] | None = None) -> Store:
     """Open the store at `path` to add runs: create it, or resume it if it holds the same
     config. Takes the writer lock (StoreBusy if another process writes it).
 
     A store of another config raises StoreMismatch; with replace=True it is replaced, but
-    only once the first new run is durable (nothing is deleted before then)."""
+    only once the first new run is durable (nothing is deleted before then). `earlier`
+    ({hash: engine revision}, config.earlier_hashes) names the case of the same config
+    written by an earlier engine revision, whose runs are of other physics."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
     path = Path(path)
@@ -976,6 +978,16 @@ def open_store(path, *, config_text: str, config_hash: str, version: str, kind: 
             except NotAStore as exc:
                 held, other = None, str(exc)
             if held != config_hash and not replace:
+                revision = (earlier or {}).get(held)
+                if revision is not None:
+                    from .config import ENGINE_REVISION, ENGINE_REVISIONS
+
+                    raise StoreMismatch(
+                        f"{path} holds results of this config from an earlier rodphase (engine "
+                        f"revision {revision}; this one is {ENGINE_REVISION}: "
+                        f"{ENGINE_REVISIONS[ENGINE_REVISION]}), whose runs are of other "
+                        "physics and are not resumed; use another output file, or --force to "
+                        "replace it")
                 raise (NotAStore if other else StoreMismatch)(
                     other.replace("give a file written by rodphase run or rodphase sweep",
                                   "use another output file, or --force to replace it")

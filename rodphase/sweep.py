@@ -354,7 +354,7 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
                 # config's file is refused before anything is compiled or simulated
                 store = stack.enter_context(open_store(
                     out_path, config_text=text, config_hash=digest, version=__version__,
-                    kind="sweep", replace=replace))
+                    kind="sweep", replace=replace, earlier=C.earlier_hashes(sweep, scene)))
                 if backend == "loky":
                     echo("Compiling the kernel (once; numba caches it on disk) ...")
                     cpu = cpu_seconds()

@@ -466,13 +466,17 @@ SHIPPED_HASHES = {
 }
 
 
+def _shipped_parts(name):
+    path = C.PACKAGE_CONFIGS / name
+    if name.startswith("scenes/"):
+        return (C.load_scene(path, [], SCENES),)
+    return C.load_sweep(path, [], SCENES)
+
+
 def test_shipped_config_hashes_are_stable():
+    # the configs' own hashes (engine revision 1: as before the revision was part of it)
     for name, expected in SHIPPED_HASHES.items():
-        path = C.PACKAGE_CONFIGS / name
-        if name.startswith("scenes/"):
-            digest = C.config_hash(C.load_scene(path, [], SCENES))
-        else:
-            digest = C.config_hash(*C.load_sweep(path, [], SCENES))
+        digest = C.config_hash(*_shipped_parts(name), revision=1)
         assert digest == expected, name
 
 
@@ -487,7 +491,7 @@ def test_fold_contact_off_gives_the_hashes_from_before_it():
                                                       ("contact.sleep", False),
                                                       ("solver.refine_from", "start"),
                                                       ("solver.static_stability", False)], SCENES)
-        assert C.config_hash(cfg) == expected, name
+        assert C.config_hash(cfg, revision=1) == expected, name
 
 
 # the scenes' pins before solver.static_stability (issue #32): with it off they hash as before
@@ -508,7 +512,7 @@ BEFORE_STATIC_STABILITY = {
 def test_static_stability_off_gives_the_hashes_from_before_it():
     for name, expected in BEFORE_STATIC_STABILITY.items():
         cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("solver.static_stability", False)], SCENES)
-        assert C.config_hash(cfg) == expected, name
+        assert C.config_hash(cfg, revision=1) == expected, name
 
 
 def test_this_sessions_keys_at_their_old_behaviour_give_the_hashes_from_before_them():
@@ -519,7 +523,7 @@ def test_this_sessions_keys_at_their_old_behaviour_give_the_hashes_from_before_t
         cfg = C.load_scene(C.PACKAGE_CONFIGS / name, [("contact.sleep", False),
                                                       ("solver.refine_from", "start"),
                                                       ("solver.static_stability", False)], SCENES)
-        assert C.config_hash(cfg) == expected, name
+        assert C.config_hash(cfg, revision=1) == expected, name
 
 
 def test_a_hash_neutral_key_counts_only_when_it_leaves_its_neutral_value(monkeypatch):
@@ -561,3 +565,38 @@ def test_contact_thinning_force_is_a_checked_key_that_moves_no_hash_at_its_defau
     assert C.config_hash(explicit) == C.config_hash(on) != C.config_hash(off)
     with pytest.raises(C.ConfigError, match="contact.thinning_force"):
         C.load_scene("twist_under_load", [("contact.thinning_force", "sometimes")], SCENES)
+
+
+def test_a_store_of_an_earlier_engine_revision_is_not_resumed(tmp_path):
+    # Every shipped config hashes apart under the current engine revision (its runs are of
+    # other physics than revision 1's: the clamp couple of 2026-12-06), and `rodphase run`
+    # into a store an earlier rodphase wrote for the same config refuses it (exit 2, one
+    # line naming both revisions), where the same command resumes a store of its own
+    from rodphase import __version__
+    from rodphase.store import open_store
+
+    assert C.ENGINE_REVISION >= 2
+    for name in SHIPPED_HASHES:
+        parts = _shipped_parts(name)
+        assert C.config_hash(*parts) != C.config_hash(*parts, revision=1), name
+        assert C.earlier_hashes(*parts)[C.config_hash(*parts, revision=1)] == 1
+    cfg = C.load_scene("twist_under_load", [("rod.elements", 8)], SCENES)
+    old = tmp_path / "old.h5"
+    with open_store(old, config_text=C.to_yaml(scene=cfg), version="0.old", kind="run",
+                    config_hash=C.config_hash(cfg, revision=1)):
+        pass
+    result = CliRunner().invoke(main, ["run", "twist_under_load", "-o", str(old),
+                                       "--set", "rod.elements=8"])
+    assert result.exit_code == 2, result.output
+    lines = [ln for ln in result.output.strip().splitlines() if ln.startswith("error")]
+    assert len(lines) == 1 and "earlier rodphase (engine revision 1; this one is " \
+        f"{C.ENGINE_REVISION}" in lines[0] and "--force" in lines[0], result.output
+    assert "Traceback" not in result.output
+    with open_store(tmp_path / "new.h5", config_text=C.to_yaml(scene=cfg), version=__version__,
+                    kind="run", config_hash=C.config_hash(cfg),
+                    earlier=C.earlier_hashes(cfg)):
+        pass
+    with open_store(tmp_path / "new.h5", config_text=C.to_yaml(scene=cfg), version=__version__,
+                    kind="run", config_hash=C.config_hash(cfg),
+                    earlier=C.earlier_hashes(cfg)):
+        pass  # its own revision's store opens again (resume)
