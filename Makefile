@@ -109,7 +109,8 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 ##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
 .PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
-	robustness study-shear study-damping study-friction study-neo-hookean static-path hold-budget
+	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
+	static-path hold-budget
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -160,6 +161,8 @@ study-friction: $(STAMP)  ## Fig 3 with self-contact friction 0.2 and 0.5
 	$(VARIANTS_RUN) friction_0.2 friction_0.5 --figure docs/img/map_friction.png
 study-neo-hookean: $(STAMP)  ## Fig 3 with the conservative neo-Hookean law (from rest)
 	$(VARIANTS_RUN) neo_hookean --figure docs/img/map_neo_hookean.png
+study-contact: $(STAMP)  ## Fig 3 without the contact thinning force (PyElastica's contact)
+	$(VARIANTS_RUN) no_thinning --figure docs/img/map_no_thinning.png
 
 # the random sweep is fig3's; the reference (24 x 24 by continuation) and the adaptive one are its own
 boundary-error: fig3  ## phase-boundary error of random and adaptive sampling against a 24 x 24 reference
