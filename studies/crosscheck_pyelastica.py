@@ -571,17 +571,16 @@ def fig3_settings(phi: float, extension: float, elements: int) -> dict:
     not carry over named in "unmapped"."""
     from rodphase import config as C
     from rodphase import scenes
-    from rodphase.rod.simulate import rotational_damping_auto, time_step
+    from rodphase.rod.simulate import _rod_arrays, rotational_damping_auto, time_step
 
     cfg = fig3_config(phi, extension, elements)
     rod = scenes.rod_from(cfg)
     problem = scenes.twist_under_load(cfg)
     r, s, k = cfg.rod, cfg.solver, cfg.contact
-    l0 = r.length / elements
-    m_e = r.density * math.pi * r.radius**2 * l0
-    # rodphase's pair spring k = stiffness·E·l0 and dashpot 2ζ√(k·m_e) are per pair, as
-    # PyElastica's RodSelfContact(k, nu): the inverse of contact_mapping above
-    k_pair = k.stiffness * cfg.material.youngs_modulus * l0
+    # rodphase's pair spring and dashpot, per pair as PyElastica's RodSelfContact(k, nu) (the
+    # inverse of contact_mapping above): the kernel's own arrays, the same for every element
+    arrays = _rod_arrays(problem)
+    k_pair, nu_pair = float(arrays["contact_k"][0]), float(arrays["contact_c"][0])
     turns = C.twist_turns(cfg)
     return {
         "phi": phi, "extension": extension, "n_elem": elements,
@@ -598,7 +597,7 @@ def fig3_settings(phi: float, extension: float, elements: int) -> dict:
         "rotational_damping": (rotational_damping_auto(rod) if s.rotational_damping == "auto"
                                else s.rotational_damping),
         "quadratic_drag": s.quadratic_drag,
-        "contact_k": k_pair, "contact_nu": 2.0 * k.damping_ratio * math.sqrt(k_pair * m_e),
+        "contact_k": k_pair, "contact_nu": nu_pair,
         # rodphase's own step with contact awake; PyElastica's position Verlet has the same
         # explicit bound for the axial waves that set it
         "dt_rodphase": time_step(problem)[0],
