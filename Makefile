@@ -110,7 +110,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 .PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
 	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
-	static-path hold-budget
+	static-path hold-budget energy-audit
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -163,6 +163,13 @@ study-neo-hookean: $(STAMP)  ## Fig 3 with the conservative neo-Hookean law (fro
 	$(VARIANTS_RUN) neo_hookean --figure docs/img/map_neo_hookean.png
 study-contact: $(STAMP)  ## Fig 3 without the contact thinning force (PyElastica's contact)
 	$(VARIANTS_RUN) no_thinning --figure docs/img/map_no_thinning.png
+
+# issue #29 item 1: the five points of Fig 3 that fail, as `make fig3` runs them (seed 2020's Sobol points)
+FIG3_FAILURES = --point 2.4115579335018995 1.093481214158237 --point 2.4905348515138033 1.1090010169893503 \
+	--point 2.5258821224793793 1.079950714390725 --point 2.557734097540379 1.0524589744396509 \
+	--point 2.5985506212338807 1.1349544170312584
+energy-audit: $(STAMP)  ## Fig 3's five failures: the power the paper's law adds in their last second (reproduction.md)
+	$(BIN)/python studies/energy_audit.py $(FIG3_FAILURES) --write docs/reproduction.md
 
 # the random sweep is fig3's; the reference (24 x 24 by continuation) and the adaptive one are its own
 boundary-error: fig3  ## phase-boundary error of random and adaptive sampling against a 24 x 24 reference
