@@ -444,12 +444,19 @@ def test_an_element_sheared_past_45_degrees_stops_the_run_there(degrees, stops):
     result = simulate(problem)
     if stops:
         assert result.status == "unstable" and result.diagnostics["guard"] == "shear"
-        found = re.search(r"sheared by more than 45° .* at element (\d+) \(value ([0-9.]+)\)",
-                          result.message)
+        found = re.search(r"sheared by more than 45° .* at element (\d+) \(value ([0-9.]+); "
+                          r"the element stretched to l/l0 = ([0-9.]+), the rod's largest ([0-9.]+) at "
+                          r"element (\d+)\)", result.message)
         assert found, result.message
         assert int(found.group(1)) == 7
         # the angle in rad, printed to 3 digits; the first check is one step in
         assert math.degrees(float(found.group(2))) == pytest.approx(degrees, abs=1.0)
+        # the stretch is the final state's, to the 3 digits printed
+        stretch = np.linalg.norm(result.positions[8] - result.positions[7]) / rod.element_length
+        assert float(found.group(3)) == pytest.approx(stretch, abs=5e-4 * stretch)
+        lengths = np.linalg.norm(np.diff(result.positions, axis=0), axis=1) / rod.element_length
+        assert float(found.group(4)) == pytest.approx(lengths.max(), abs=5e-4 * lengths.max())
+        assert int(found.group(5)) == int(np.argmax(lengths))
     else:
         assert result.ok, result.message
 

@@ -226,13 +226,16 @@ GUARDS = {
                        "lower loading.twist_rate (turns/s)."),
     S_SHEAR: Guard("shear", "element sheared by more than 45° (its frame's d3 that far off "
                    "its tangent)", "element",
-                   # Fig 3's runaways at Φa >= 2.49 are the rod's shear under the torque, at
-                   # any resolution, step or twist rate (docs/reproduction.md, "The triple
-                   # point's failures"): the step advice alone sent users the wrong way
-                   "If the torque here shears the rod this far at any step (a shear runaway "
-                   "of the Cosserat model), only a stiffer shear removes it: "
-                   "material.shear_stiffness (N, 4GA/3) or material.shear_modulus. If not, "
-                   "use more rod.elements. " + _STEP_ADVICE),
+                   # Fig 3's runaways at Φa >= 2.41 trip at any resolution, step or twist
+                   # rate, an element of a strand stretched to 1.8-2.1 while the law's
+                   # 1/e³ bend couple feeds the motion (docs/reproduction.md, "Where the
+                   # corner's failures get their energy"): the step advice alone sent users
+                   # the wrong way
+                   "If it trips here at any step and resolution (a runaway of the Cosserat "
+                   "model, often with elements stretched past 1.4, where the incompressible "
+                   "law's stiffnesses have fallen as 1/e and 1/e³), only another model removes "
+                   "it: a stiffer shear (material.shear_stiffness, N, 4GA/3, or "
+                   "material.shear_modulus). If not, use more rod.elements. " + _STEP_ADVICE),
 }
 
 # What advance reports besides the history, one row each (name, meaning); info[D_*] slots

@@ -672,8 +672,18 @@ def _verdict(problem: Problem, plan: _StagePlan, outcome: _Outcome, clock: _Cloc
             advice = (f"solver.dt = {clock.dt:.3g} s is {clock.dt / clock.bound:.3g} times the "
                       f"stable bound {clock.bound:.3g} s for {n} elements: use solver.dt: auto "
                       "or a dt below the bound.")
+        value = f"value {info[k.D_VALUE]:.3g}"
+        if code == k.S_SHEAR and 0 <= where < n:
+            # a sheared element is usually a stretched one too; how far says whether the
+            # law's range is at stake (docs/reproduction.md, "Where the corner's failures
+            # get their energy": 1.8-2.1 at Fig 3's five trips)
+            stretch = (np.linalg.norm(np.diff(state.x, axis=1), axis=0)
+                       / problem.rod.element_length)
+            most = int(np.argmax(stretch))
+            value += (f"; the element stretched to l/l0 = {stretch[where]:.3g}, the rod's "
+                      f"largest {stretch[most]:.3g} at element {most}")
         message = (f"unstable in {plan.label} at t = {state.time:.4g} s: {guard_words} at "
-                   f"{unit} {where} (value {info[k.D_VALUE]:.3g}); dt = {outcome.step_dt:.3g} "
+                   f"{unit} {where} ({value}); dt = {outcome.step_dt:.3g} "
                    f"s, stable bound {outcome.step_bound:.3g} s. {advice}")
         return ("unstable", message, guard), True
     if plan.stage.until_equilibrium and code != k.S_EQUILIBRIUM and status == "ok":
