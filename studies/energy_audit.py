@@ -80,21 +80,53 @@ def unaccounted_bend_power(x, v, Q, rest_voronoi, bend_stiffness, rest_curvature
     return -1.5 * d ** 2 * bend_stiffness * (rest_voronoi * eps_dot / eps ** 4)[:, None]
 
 
+def unaccounted_stretch_power(x, v, Q, w, rest_length, shear_stiffness, rest_shear):
+    """(n,) [W] per element: the power the incompressible stretch-shear law puts into the rod
+    beyond −dV_s/dt, V_s = ½·l0·(σ − σ0)·S·(σ − σ0) the energy the history records as
+    stretch_energy. The law's force and shear couple are that energy's gradient times 1/e, so
+    this is (1 − 1/e)·dV_s/dt, with dV_s/dt = l0·S(σ − σ0)·σ̇ and
+    σ̇ = (Q·ṫ − ω × Q·t)/l0 (t the element's edge, ω material). Unlike the bend-twist law's,
+    it depends on the energy it is measured against: a pure stretch has the exact potential
+    S·l0·(e − 1 − ln e), against which its power is zero. x, v (n+1, 3); Q (n, 3, 3);
+    w (n, 3); rest_length (n,); shear_stiffness and rest_shear (n, 3)."""
+    edge, edge_rate = np.diff(x, axis=0), np.diff(v, axis=0)
+    material = np.einsum("iab,ib->ia", Q, edge)
+    strain = material / rest_length[:, None] - np.array([0.0, 0.0, 1.0]) - rest_shear
+    strain_rate = (np.einsum("iab,ib->ia", Q, edge_rate)
+                   - np.cross(w, material)) / rest_length[:, None]
+    rate = rest_length * np.sum(shear_stiffness * strain * strain_rate, axis=1)
+    e = np.linalg.norm(edge, axis=1) / rest_length
+    return (1.0 - 1.0 / e) * rate
+
+
 def audit(problem, result) -> dict:
-    """The audit of one state (the final state of `result`, a run of `problem`, whose
-    stiffness and radius factors are 1: the twist_under_load scene's)."""
+    """The audit of one state (the final state of `result`, a run of `problem`: the paper's
+    incompressible law, stiffness and radius factors 1, no local twist, as in
+    twist_under_load)."""
+    rod = problem.rod
+    if not rod.incompressible or rod.law != "paper":
+        raise ValueError("the audit is of the paper's incompressible law (material.law: "
+                         f"paper, material.incompressible: true); got {rod.law}, "
+                         f"incompressible {rod.incompressible}")
     arrays = _rod_arrays(problem)
     solver = problem.solver
     x, v = result.positions, result.velocities
     Q, w = result.directors, result.angular_velocities
+    history = result.history
+    for factor in ("stiffness_factor", "radius_factor"):
+        if factor in history and not np.all(history[factor] == 1.0):
+            raise ValueError(f"the audit assumes {factor} 1 throughout")
     l0 = arrays["rest_length"]
     length, ldot = length_rates(x, v)
     source = unaccounted_bend_power(x, v, Q, arrays["rest_voronoi"],
                                     arrays["bend_stiffness"].T, arrays["rest_curvature"].T)
-    mass, inertia = arrays["node_mass"], arrays["inertia"].T
+    stretch_source = unaccounted_stretch_power(x, v, Q, w, l0, arrays["shear_stiffness"].T,
+                                               arrays["rest_shear"].T)
+    # the kick turns a torque into spin with the inertia J/e of the thinned section
+    mass, inertia = arrays["node_mass"], arrays["inertia"].T / (length / l0)[:, None]
     speed2 = np.sum(v ** 2, axis=1)
     spin2 = w ** 2
-    spin = float(problem.rod.radius) * np.sqrt(spin2.sum(axis=1))
+    spin = float(rod.radius) * np.sqrt(spin2.sum(axis=1))
     c_rot = (rotational_damping_auto(problem.rod) if solver.rotational_damping is None
              else solver.rotational_damping)
     axial = problem.rod.axial_stiffness * solver.strain_rate_damping / length  # c_i = EA·η/l
@@ -109,6 +141,7 @@ def audit(problem, result) -> dict:
     kinetic = 0.5 * float(np.sum(mass * speed2)) + 0.5 * float(np.sum(inertia * spin2))
     return dict(time=float(result.diagnostics["final_time"]), kinetic=kinetic,
                 bend=float(source[:, :2].sum()), twist=float(source[:, 2].sum()),
+                stretch_law=float(stretch_source.sum()),
                 losses=losses, stretch=float((length / l0).max()),
                 at=int(np.argmax(length / l0)), elements=len(l0))
 
@@ -166,12 +199,14 @@ def states(cfg, samples: int):
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| t [s] | kinetic energy [J] | law's unaccounted power: bending, twist [W] | "
-             "damping losses: linear, quadratic, axial [W] | largest stretch l/l0 (element) |",
+    lines = ["| t [s] | kinetic energy [J] | law's unaccounted power: bending, twist; "
+             "stretch-shear [W] | damping losses: linear, quadratic, axial [W] | "
+             "largest stretch l/l0 (element) |",
              "|---|---|---|---|---|"]
     for r in rows:
         loss = r["losses"]
-        lines.append(f"| {r['time']:.3f} | {r['kinetic']:.3g} | {r['bend']:+.3g}, {r['twist']:+.3g} "
+        lines.append(f"| {r['time']:.3f} | {r['kinetic']:.3g} | {r['bend']:+.3g}, {r['twist']:+.3g}; "
+                     f"{r['stretch_law']:+.3g} "
                      f"| {loss['linear']:.3g}, {loss['quadratic']:.3g}, {loss['axial']:.3g} "
                      f"| {r['stretch']:.3f} ({r['at']} of {r['elements']}) |")
     return "\n".join(lines)
@@ -191,7 +226,7 @@ def main(argv=None) -> int:
     for twist_density, extension in args.point or [(2.557734097540379, 1.0524589744396509)]:
         last, rows, message = states(scene(twist_density, extension, args.sets), args.samples)
         head = (f"**Φa {twist_density:.4f}, L/L0 {extension:.4f}**: {last.status}"
-                f" ({message.split(';')[0] if message else 'no message'})")
+                f" ({message.split('; dt =')[0] if message else 'no message'})")
         text = table(rows) if rows else "no guard stopped the run: nothing to audit"
         print(head + "\n" + text, flush=True)
         sections.append(head + "\n\n" + text)

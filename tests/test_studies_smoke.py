@@ -419,3 +419,37 @@ def test_energy_audit_power_is_what_the_law_adds_to_the_bend_energys_rate():
             assert abs(power + rate - expected) <= tolerance, (seed, incompressible)
             if incompressible:
                 assert abs(expected) > 2 * tolerance
+
+
+def test_energy_audit_stretch_power_is_what_the_law_adds_to_the_stretch_energys_rate():
+    # The same check for the stretch-shear law (bend and inertia off): its force and shear
+    # couple are the gradient of V_s = Σ ½·l0·(σ−σ0)·S·(σ−σ0) times 1/e, so P + dV_s/dt =
+    # Σ (1 − 1/e)·dV_s/dt, the audit's column. Here the law is the exact gradient (no
+    # first-order log): the tolerance is the central differences' h² error and round-off,
+    # 1e-6 of the powers; the compressible law (no 1/e) leaves 0 to the same tolerance.
+    import naive as N
+    from test_naive_twin import random_rod
+
+    ea = study("energy_audit")
+    for seed in range(3):
+        props, rod, state, rng = random_rod(seed)
+        x, v, Q, w = (N.to_twin(a) for a in (state.x, state.v, state.Q, state.w))
+
+        def stretch_energy(x, Q):
+            return N.internal_loads(x, np.zeros_like(x), Q, np.zeros_like(w), rod,
+                                    incompressible=False, f_bend=0.0).stretch_energy
+
+        h = 1e-6
+        turned = [np.array([N.rotation_matrix(-sign * h * w[i]) @ Q[i] for i in range(len(Q))])
+                  for sign in (1, -1)]
+        rate = (stretch_energy(x + h * v, turned[0]) - stretch_energy(x - h * v, turned[1])) / (2 * h)
+        expected = ea.unaccounted_stretch_power(x, v, Q, w, rod.rest_length, rod.shear_stiffness,
+                                                rod.rest_shear).sum()
+        for incompressible in (True, False):
+            loads = N.internal_loads(x, v, Q, w, rod, incompressible=incompressible,
+                                     f_bend=0.0, f_inertia=0.0)
+            power = float(np.sum(loads.force * v) + np.sum(loads.torque * w))
+            tolerance = 1e-6 * (abs(power) + abs(rate))
+            assert abs(power + rate - (expected if incompressible else 0.0)) <= tolerance, (
+                seed, incompressible)
+        assert abs(expected) > 1e3 * tolerance
