@@ -9,15 +9,18 @@ turns, straight start at 0.8 of the onset), and where a guard stopped the run, r
 last try up to evenly spaced times of the second before the trip (`max_steps` as the clock)
 and audits each state:
 
-- the kinetic energy;
+- the kinetic energy (the rotary inertia J/e, as the kick has it);
 - the power the bend-twist law puts into the rod that no energy of the model accounts for.
   The paper's incompressible law gives each Voronoi domain the couple B·(κ − κ0)/ε³: the
   rotational gradient of V_b = ½·(κ − κ0)·B·(κ − κ0)·D0/ε³. V_b also depends on the
   domain's dilatation ε, but the law applies no axial force −∂V_b/∂ε to the nodes, so along
   any motion the law's couples do P = −(3/2)·Σ (κ − κ0)·B·(κ − κ0)·D0·ε̇/ε⁴ more work than
   V_b gives up (split below into the bending components 1, 2 and the twist component 3;
-  P > 0: bent domains shortening, for free). tests/test_studies_smoke.py checks P against
-  the naive twin's loads and central differences of V_b;
+  P > 0: bent domains shortening, for free); and the same for the stretch-shear law, whose
+  force and couple carry 1/e: (1 − 1/e)·dV_s/dt against the recorded quadratic energy V_s
+  (unaccounted_stretch_power says why that one depends on its reference).
+  tests/test_studies_smoke.py checks both against the naive twin's loads and central
+  differences of V_b and V_s;
 - the power that the damping takes out, each law as the kernel integrates it: the linear
   drag of the nodes (solver.damping), of the element spins (solver.rotational_damping, half
   of it on the twist axis), the quadratic drag of both (solver.quadratic_drag) and the axial
@@ -25,8 +28,8 @@ and audits each state:
   losses are a lower bound;
 - the largest element stretch e = l/l0 and where it is.
 
-A hold whose P outgrows the counted losses while its kinetic energy grows is fed by the law
-itself. docs/reproduction.md, "Where the corner's failures get their energy", reads the table.
+A state where the unaccounted powers outgrow the counted losses is one where the law puts
+energy into the rod faster than the damping takes it out. docs/reproduction.md, "Where the corner's failures get their energy", reads the table.
 """
 
 import argparse
