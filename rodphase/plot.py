@@ -228,8 +228,13 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
         if (~ok).any():
             ax.scatter(table.loc[~ok, "extension"], table.loc[~ok, "twist_density"], marker="x",
                        s=18, c="black", linewidths=0.9, zorder=3)
+            # how they failed, by status (unstable: a guard stopped the run and its message
+            # says where and why; error: an exception), so a reader of the figure knows
+            # which it is without the table
+            why = ", ".join(f"{count} {name}" for name, count
+                            in status[~ok].astype(str).value_counts().sort_index().items())
             handles.append(Line2D([], [], ls="", marker="x", ms=5, color="black",
-                                  label=f"failed ({int((~ok).sum())})"))
+                                  label=f"failed ({why})"))
         if "unseen_coil" in table and table["unseen_coil"].fillna(False).astype(bool).any():
             blind = table["unseen_coil"].fillna(False).astype(bool)
             ax.scatter(table.loc[blind, "extension"], table.loc[blind, "twist_density"],

@@ -296,7 +296,16 @@ def test_a_failed_run_is_drawn_where_it_was_sampled_in_either_twist_reading(no_f
                    and np.allclose(c.get_offsets()[0], [1.1, expected])]
         assert crosses, twist
         legend = [t.get_text() for t in fig.legends[0].get_texts()]
-        assert "failed (1)" in legend and "not converged (1)" in legend
+        assert "failed (1 error)" in legend and "not converged (1)" in legend
+
+
+def test_the_failed_legend_counts_each_way_of_failing(no_files):
+    # a guard's stop (unstable) and an exception (error) are different stories for a reader
+    table = sweep_table()
+    table.loc[[1, 2], "status"] = "unstable"
+    table.loc[4, "status"] = "error"
+    legend = [t.get_text() for t in plot.phase_map(table).legends[0].get_texts()]
+    assert "failed (1 error, 2 unstable)" in legend, legend
 
 
 def test_phase_map_caption_and_journal_sizes(no_files):
