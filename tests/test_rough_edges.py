@@ -166,7 +166,7 @@ def test_scenes_lists_whole_sentences():
     text = " ".join(out.output.split())
     # these were cut at the end of their first comment line
     assert "rest length L0: the paper's material coordinate" in text
-    assert "rod, n = 80." in text and "about a minute on two cores." in text
+    assert "rod, n = 80." in text and "on two cores once numba has compiled." in text
 
 
 def test_plot_help_names_the_formats_it_writes():
