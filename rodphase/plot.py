@@ -152,6 +152,14 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
     return "; ".join(parts)
 
 
+def _failed_label(statuses: pd.Series) -> str:
+    """'failed (1 error, 2 unstable)': how the failed runs failed, by status (unstable: a
+    guard stopped the run, its message says where and why; error: an exception), so that a
+    reader of the figure tells them apart without the table."""
+    counts = statuses.astype(str).value_counts().sort_index()
+    return "failed (" + ", ".join(f"{count} {name}" for name, count in counts.items()) + ")"
+
+
 def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | None = None,
               title: str | None = None, twist: str = "twist_density", caption: str | None = None,
               size: tuple[float, float] | str | None = None, ax=None,
@@ -228,13 +236,8 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
         if (~ok).any():
             ax.scatter(table.loc[~ok, "extension"], table.loc[~ok, "twist_density"], marker="x",
                        s=18, c="black", linewidths=0.9, zorder=3)
-            # how they failed, by status (unstable: a guard stopped the run and its message
-            # says where and why; error: an exception), so a reader of the figure knows
-            # which it is without the table
-            why = ", ".join(f"{count} {name}" for name, count
-                            in status[~ok].astype(str).value_counts().sort_index().items())
             handles.append(Line2D([], [], ls="", marker="x", ms=5, color="black",
-                                  label=f"failed ({why})"))
+                                  label=_failed_label(status[~ok])))
         if "unseen_coil" in table and table["unseen_coil"].fillna(False).astype(bool).any():
             blind = table["unseen_coil"].fillna(False).astype(bool)
             ax.scatter(table.loc[blind, "extension"], table.loc[blind, "twist_density"],
