@@ -36,12 +36,11 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rodphase import api, runner
 from rodphase import config as C
 from rodphase.rod.simulate import _rod_arrays, rotational_damping_auto
-from rodphase.scenes import SCENES, build
+from rodphase.scenes import SCENES, build, measured_curvature
 from rodphase.studytools import write_block
 from rodphase.sweep import scene_for
 
@@ -58,12 +57,6 @@ def scene(twist_density: float, extension: float, sets: list[str]):
     return C.validate_scene(C.apply_overrides(cfg.plain(), items), SCENES)
 
 
-def curvatures(Q: np.ndarray, rest_voronoi: np.ndarray) -> np.ndarray:
-    """(n-1, 3) κ = log(Q_j Q_{j+1}ᵀ)/D0 (material frame), Q (n, 3, 3) rows d1 d2 d3."""
-    R = np.einsum("jab,jcb->jac", Q[:-1], Q[1:])
-    return Rotation.from_matrix(R).as_rotvec() / rest_voronoi[:, None]
-
-
 def length_rates(x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(l, dl/dt) of each element, (n,) each, from positions and velocities (n+1, 3)."""
     edge = np.diff(x, axis=0)
@@ -71,15 +64,16 @@ def length_rates(x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return length, np.einsum("ij,ij->i", edge / length[:, None], np.diff(v, axis=0))
 
 
-def unaccounted_bend_power(x, v, Q, rest_voronoi, bend_stiffness, rest_curvature):
+def unaccounted_bend_power(x, v, Q, rest_length, bend_stiffness, rest_curvature):
     """(n-1, 3) [W] per Voronoi domain and component (d1, d2 bending; d3 twist): the power
     the incompressible bend-twist law puts into the rod beyond −dV_b/dt,
-    −(3/2)·(κ − κ0)_c²·B_c·D0·ε̇/ε⁴. x, v (n+1, 3); Q (n, 3, 3) rows d1 d2 d3; rest_voronoi
-    (n-1,); bend_stiffness and rest_curvature (n-1, 3) (the rod's factors folded in)."""
+    −(3/2)·(κ − κ0)_c²·B_c·D0·ε̇/ε⁴. x, v (n+1, 3); Q (n, 3, 3) rows d1 d2 d3; rest_length
+    (n,); bend_stiffness and rest_curvature (n-1, 3) (the rod's factors folded in)."""
+    rest_voronoi = 0.5 * (rest_length[1:] + rest_length[:-1])
     length, rate = length_rates(x, v)
     eps = 0.5 * (length[:-1] + length[1:]) / rest_voronoi
     eps_dot = 0.5 * (rate[:-1] + rate[1:]) / rest_voronoi
-    d = curvatures(Q, rest_voronoi) - rest_curvature
+    d = measured_curvature(Q, rest_length) - rest_curvature
     return -1.5 * d ** 2 * bend_stiffness * (rest_voronoi * eps_dot / eps ** 4)[:, None]
 
 
@@ -121,7 +115,7 @@ def audit(problem, result) -> dict:
             raise ValueError(f"the audit assumes {factor} 1 throughout")
     l0 = arrays["rest_length"]
     length, ldot = length_rates(x, v)
-    source = unaccounted_bend_power(x, v, Q, arrays["rest_voronoi"],
+    source = unaccounted_bend_power(x, v, Q, l0,
                                     arrays["bend_stiffness"].T, arrays["rest_curvature"].T)
     stretch_source = unaccounted_stretch_power(x, v, Q, w, l0, arrays["shear_stiffness"].T,
                                                arrays["rest_shear"].T)

@@ -413,7 +413,7 @@ def test_energy_audit_power_is_what_the_law_adds_to_the_bend_energys_rate():
             rate = (along(1) - along(-1)) / (2 * h)
             theta = np.arccos(np.clip(loads.cosines, -1, 1)).max()
             tolerance = theta ** 2 / 12 * (abs(power) + abs(rate))
-            expected = (ea.unaccounted_bend_power(x, v, Q, rod.rest_voronoi, rod.bend_stiffness,
+            expected = (ea.unaccounted_bend_power(x, v, Q, rod.rest_length, rod.bend_stiffness,
                                                   rod.rest_curvature).sum()
                         if incompressible else 0.0)
             assert abs(power + rate - expected) <= tolerance, (seed, incompressible)
