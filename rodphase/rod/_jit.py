@@ -7,14 +7,8 @@ import llvmlite.binding as _llvm
 from numba import njit as _njit
 from numba.core.caching import FunctionCache as _FunctionCache
 
-# never 'nnan'/'ninf': the stability guard needs its NaN checks. Never 'reassoc' either: with
-# it LLVM reorders sums by the shape of the code around them, so moving a block of advance's
-# loop into a helper moved the reference scenes' bits (75 of 161 arrays, by up to 4e-8
-# relative after a 500 k-step buckling run); without it the same move is bit-identical, and
-# a refactor of the fused loop can be proven to change nothing. Its one use that paid, the
-# vectorised energy sums, is kept by summing in an explicit order (kernel.fixed_order_sum):
-# per step new/old 1.00-1.03 (docs/studies/performance-history.md, 2026-12-06).
-FASTMATH = {"nsz", "arcp", "contract", "afn"}
+# never 'nnan'/'ninf': the stability guard needs its NaN checks
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 # LLVM's loop vectoriser gives up on a loop that would need more than 8 runtime checks that
 # its arrays do not overlap ("too many memory checks needed"). numba cannot tell LLVM that

@@ -405,24 +405,6 @@ N_WORK = 13  # rows of the scratch array internal_loads needs, each of length n
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
-def fixed_order_sum(values, count):
-    """values[:count] summed in a fixed order: four running sums, then pairwise."""
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    whole = count - count % 4
-    for i in range(0, whole, 4):
-        s0 += values[i]
-        s1 += values[i + 1]
-        s2 += values[i + 2]
-        s3 += values[i + 3]
-    for i in range(whole, count):
-        s0 += values[i]
-    return (s0 + s1) + (s2 + s3)
-
-
-@njit(cache=True, fastmath=_FASTMATH, inline="always")
 def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffness,
                    bend_stiffness, rest_curvature, rest_shear, local_mask, incompressible,
                    f_shear, f_bend, f_inertia, f_twist, local_twist,
@@ -443,8 +425,6 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
     cos_ = work[7]
     factor = work[8]
     c0, c1, c2 = work[9], work[10], work[11]  # couple / ε³ per Voronoi domain
-    # energy per element, then per Voronoi domain, summed by fixed_order_sum: a sum carried
-    # through a loop keeps LLVM from vectorising it without 'reassoc' (_jit.FASTMATH)
     density = work[12]
 
     # elements: the internal force n = S(σ − σ0) of stretch and shear, the shear couple,
@@ -484,7 +464,9 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         torque[0, i] = g * (qt1 * n2 - qt2 * n1) + j1 * w[2, i] - j2 * w[1, i] + j0 * h
         torque[1, i] = g * (qt2 * n0 - qt0 * n2) + j2 * w[0, i] - j0 * w[2, i] + j1 * h
         torque[2, i] = g * (qt0 * n1 - qt1 * n0) + j0 * w[1, i] - j1 * w[0, i] + j2 * h
-    stretch_energy = fixed_order_sum(density, n)
+    stretch_energy = 0.0
+    for i in range(n):
+        stretch_energy += density[i]
 
     # nodes: the difference of the element forces
     force[0, 0] = nl0[0]
@@ -526,6 +508,7 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
             worst_at = j
     energies[2] = worst_cos
     energies[3] = worst_at
+    bend_energy = 0.0
     for j in range(n - 1):
         f = factor[j] / rest_voronoi[j]
         k0 = ka0[j] * f
@@ -537,7 +520,7 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         m0 = f_bend * bend_stiffness[0, j] * d0
         m1 = f_bend * bend_stiffness[1, j] * d1
         m2 = f_bend * bend_stiffness[2, j] * d2
-        density[j] = 0.5 * (m0 * d0 + m1 * d1 + m2 * d2) * rest_voronoi[j]
+        bend_energy += 0.5 * (m0 * d0 + m1 * d1 + m2 * d2) * rest_voronoi[j]
         eps = 0.5 * (lengths[j] + lengths[j + 1]) / rest_voronoi[j]
         g3 = 1.0 + inc * (1.0 / (eps * eps * eps) - 1.0)
         c0[j] = g3 * m0
@@ -546,7 +529,6 @@ def internal_loads(x, v, Q, w, rest_length, rest_voronoi, inertia, shear_stiffne
         ka0[j] = k0
         ka1[j] = k1
         ka2[j] = k2
-    bend_energy = fixed_order_sum(density, n - 1)
     # elements: the bend-twist couple, the difference of the Voronoi couples B(κ − κ0)/ε³,
     # plus κ × τ·D0/ε³ split between both sides
     # (with the full curvature κ, not κ − κ0)
