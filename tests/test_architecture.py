@@ -41,8 +41,10 @@ LAYERS = [
 ]
 ORDER = {name: (row, col) for row, names in enumerate(LAYERS) for col, name in enumerate(names)}
 LONGEST_FUNCTION = 150  # lines: about one printed page
-# known to be longer, being split (issue #27): the test fails once one of them is short, so
-# that this list only shrinks
+# known to be longer, and why: kernel.advance writes its step loop out, because numba counts
+# references around every inlined helper that binds arrays and each block of the loop made a
+# helper cost 6-18 % per step (rod/kernel.py's module docstring, issue #27). The test fails
+# once one of them is short, so that this list only shrinks
 LONG_TODAY = {"rod.kernel.advance"}
 
 

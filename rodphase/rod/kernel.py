@@ -27,18 +27,33 @@ advance then binds the call to the callee's own copy, one that loads advance fro
 cache to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m
 on the reference scenes, tests/test_kernel_cache.py). The functions that run at most at check
 steps (_guards, _shear_guard, _record, _settle_windows, _stop_test with _probe_distance and
-_start_probe) are compiled on their own instead (inline="never"): every inlined call site is
-IR that numba types and lowers again inside advance (all but _stop_test, inlined, cost 12 s
-of its first compile: 60 → 48 s, benchmarks/compile_time.py functions). Their results are
-the inlined ones to the bit, compiled fresh or loaded from the cache (positions, directors,
-history and snapshots of the reference scenes, benchmarks/reference_positions.py;
-tests/test_kernel_cache.py). Taken out the same way, _drift, rotated_frame, _kinetic_energy
-and the per-step loads were not: their last bits moved. _work_arrays, which runs once per
-call, is compiled on its own too; it makes the arrays of contact, the settle windows and
-the probe. The arrays the per-step loads and the kick work in stay allocated in advance
-itself: made in _work_arrays, the recorded kinetic energy moved in its last bit (1e-17 J on
-the reference scenes; positions unchanged), LLVM optimising the loop that sums it otherwise
-once those arrays were not advance's own fresh allocations.
+_start_probe) or once per call (_work_arrays, _report) are compiled on their own instead
+(inline="never"): every inlined call site is IR that numba types and lowers again inside
+advance (all but _stop_test, inlined, cost 12 s of its first compile: 60 → 48 s,
+benchmarks/compile_time.py functions). Their results are the inlined ones to the bit,
+compiled fresh or loaded from the cache (positions, directors, history and snapshots of the
+reference scenes, benchmarks/reference_positions.py; tests/test_kernel_cache.py). Taken out
+the same way, _drift, rotated_frame, _kinetic_energy and the per-step loads were not: their
+last bits moved. The arrays the per-step loads and the kick work in come from _step_arrays,
+inlined, so that they are advance's own fresh allocations to LLVM: made in _work_arrays, the
+recorded kinetic energy moved in its last bit (1e-17 J on the reference scenes; positions
+unchanged), LLVM optimising the loop that sums it otherwise.
+
+Why the step loop is written out in advance rather than a page of calls (issue #27; measured
+2026-12-06 on a 2-core AMD EPYC, docs/studies/performance-history.md):
+- Bits: with fastmath's 'reassoc' (_jit.FASTMATH), LLVM reorders sums by the shape of the
+  code around them. The clamp block moved into an inlined helper moved 75 of the 161
+  reference arrays (1e-14 m, and 4e-8 relative after the 500 k-step buckling hold). Without
+  'reassoc' the same move, and the whole loop split into helpers, was bit-identical, but
+  dropping it costs 2-4 % per step without contact (the energy sums stop vectorising).
+- Time: each helper in the loop costs time of its own. numba counts references to every
+  array an inlined helper binds (a record such as `rod` binds all of its arrays), and its
+  refcount pruning leaves the increments and decrements around an inlined body with branches
+  (numba issues 2345, 2350): static NRT_incref sites in advance 116 → 201 with the loop
+  split. The clamp block alone as a helper cost 6 % per step without contact; the loads and
+  the kick as helpers 10-18 %, where the issue allows 3 %.
+Only the setup and the end left advance (_drag_rates, _step_arrays, _work_arrays, _report):
+bit-identical with 'reassoc', 0.99-1.02 per step.
 """
 
 from collections import namedtuple
@@ -1174,15 +1189,16 @@ def _stop_test(x, t, at_rest, touching, settings, probe_shape, probe_norm2, prob
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="never")
-def _work_arrays(x, rod, ends, settings):
+def _work_arrays(x, rod, ends, settings, probe_shape):
     """Arrays `advance` works in, made once per call (compiled on its own: it runs once):
     contact's two-level Verlet list (_contact_loads) x_build, pairs, x_near, radius_near,
     near; the contact loop's per-element buffers (segment vectors, 1/|u|², thinning lever)
     contact_work, fold_reach, fold_next; dashpots, the contact dashpots taken implicitly after
     the kick (contact.apply_dashpots; none without settings.implicit_dashpot and contact); the
     settled-shape test's window sums (_settle_windows: node positions and d1 times the radius,
-    (6, n+1) each); the probe's reference state. The arrays of the per-step loads and the
-    kick are made in advance itself (the module docstring says why).
+    (6, n+1) each); the probe's reference state and the squared norm of its shape. The
+    arrays of the per-step loads and the kick come from _step_arrays, inlined into advance
+    (the module docstring says why).
     """
     n = rod.rest_length.shape[0]
     x_build = x.copy()
@@ -1199,8 +1215,75 @@ def _work_arrays(x, rod, ends, settings):
     window_squares = np.zeros((6, n + 1))
     window_mean = np.zeros((6, n + 1))
     probe_reference = x.copy()
+    probe_norm2 = 0.0
+    for c in range(3):
+        for i in range(n + 1):
+            probe_norm2 += probe_shape[c, i] * probe_shape[c, i]
     return (x_build, pairs, x_near, radius_near, near, contact_work, fold_reach, fold_next,
-            dashpots, window_sum, window_squares, window_mean, probe_reference)
+            dashpots, window_sum, window_squares, window_mean, probe_reference, probe_norm2)
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _step_arrays(rod, ends):
+    """The arrays the per-step loads and the kick work in, 1/m and 1/J. Inlined, so that they
+    are advance's own fresh allocations to LLVM (the module docstring says why). free_inv_mass
+    is 1/m of the free nodes as the kick scales it, for the stiff dissipative terms taken
+    implicitly after the kick (_axial_damping, contact.apply_dashpots): 0 at a node held in
+    all three components, whose impulse then goes to its partner (a held node's infinite
+    mass); kick_inv_mass is its scaled copy, filled at each step. Last, the clamp frame and
+    couple (the clamp couples) and the controls' buffer (_controls)."""
+    n = rod.rest_length.shape[0]
+    force = np.zeros((3, n + 1))
+    torque = np.zeros((3, n))
+    dilatation = np.ones(n)
+    lengths = rod.rest_length.copy()
+    radius = rod.rest_radius.copy()
+    energies = np.zeros(4)
+    work = np.zeros((max(N_WORK, N_WORK_NEO_HOOKEAN), n))
+    inv_mass = 1.0 / rod.node_mass
+    inv_inertia = 1.0 / rod.inertia
+    free_inv_mass = inv_mass.copy()
+    for i in (0, n):
+        held = ends.start_held if i == 0 else ends.end_held
+        if held[0] != 0 and held[1] != 0 and held[2] != 0:
+            free_inv_mass[i] = 0.0
+    kick_inv_mass = free_inv_mass.copy()
+    axial_work = np.zeros((N_AXIAL_WORK, n))
+    return (force, torque, dilatation, lengths, radius, energies, work, inv_mass, inv_inertia,
+            free_inv_mass, kick_inv_mass, axial_work, np.empty((3, 3)), np.empty(8),
+            np.empty(N_TABLES))
+
+
+@njit(cache=True, fastmath=_FASTMATH, inline="always")
+def _drag_rates(settings):
+    """Linear drag integrated exactly over a step (integrating factor): v' = a − νv gives
+    v ← v·e^{−νdt} + a·dt·(1 − e^{−νdt})/(νdt). Stable for any ν, and right in the
+    overdamped limit νdt ≫ 1 (velocity a/ν), where multiplying by e^{−νdt} alone stalls.
+    Returns (decay, gain) of the velocities and (3,) arrays of them per material axis of the
+    spin (half the rotational damping about d3)."""
+    dt = settings.dt
+    decay, gain = _drag_factors(settings.damping * dt)
+    decay_rotation = np.empty(3)
+    gain_rotation = np.empty(3)
+    decay_rotation[0], gain_rotation[0] = _drag_factors(settings.damping_rotation * dt)
+    decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
+    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
+    return decay, gain, decay_rotation, gain_rotation
+
+
+@njit(cache=True, inline="never")
+def _report(info, max_penetration, rebuilds, max_pairs, residual, kinetic, settle_motion,
+            near_rebuilds, probes, probes_left):
+    """The run's counters into out.info (D_* slots), at the end of advance."""
+    info[D_MAX_PENETRATION] = max_penetration
+    info[D_REBUILDS] = rebuilds
+    info[D_MAX_PAIRS] = max_pairs
+    info[D_RESIDUAL] = residual
+    info[D_KINETIC] = kinetic
+    info[D_SETTLE_MOTION] = settle_motion
+    info[D_NEAR_REBUILDS] = near_rebuilds
+    info[D_PROBES] = probes
+    info[D_PROBES_LEFT] = probes_left
 
 
 @njit(cache=True, fastmath=_FASTMATH)
@@ -1254,90 +1337,38 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     axis = ends.axis.copy()
     force_dir = ends.force_direction.copy()
     gravity = ends.gravity.copy()
-    # Linear drag integrated exactly over a step (integrating factor): v' = a − νv gives
-    # v ← v·e^{−νdt} + a·dt·(1 − e^{−νdt})/(νdt). Stable for any ν, and right in the
-    # overdamped limit νdt ≫ 1 (velocity a/ν), where multiplying by e^{−νdt} alone stalls.
-    decay, gain = _drag_factors(settings.damping * dt)
-    decay_rotation = np.empty(3)
-    gain_rotation = np.empty(3)
-    decay_rotation[0], gain_rotation[0] = _drag_factors(settings.damping_rotation * dt)
-    decay_rotation[1], gain_rotation[1] = decay_rotation[0], gain_rotation[0]
-    decay_rotation[2], gain_rotation[2] = _drag_factors(0.5 * settings.damping_rotation * dt)
+    decay, gain, decay_rotation, gain_rotation = _drag_rates(settings)
     tolerance = settings.hold_tolerance
     force_scale = settings.force_scale
     equilibrium_after = settings.equilibrium_after
     quadratic_drag = settings.quadratic_drag
     drag_radius = settings.drag_radius
     settle_window = settings.settle_window
-    # the settled-shape test's windows (_settle_windows); typed int64 and bool from the start:
-    # a literal 0 or False here would have numba compile the callees that take them
-    # (_settle_windows, _record, _stop_test: not inlined) once more, for the literal types its
-    # type inference meets first
-    settle_on = stop_at_equilibrium and settle_window > 0.0
-    window_count = np.int64(0)
-    window_start = t_start
-    have_mean = np.bool_(False)
-    settle_motion = np.inf
-    settled = np.bool_(False)
-    force = np.zeros((3, n + 1))
-    torque = np.zeros((3, n))
-    dilatation = np.ones(n)
-    lengths = rest_length.copy()
-    radius = rod.rest_radius.copy()
-    energies = np.zeros(4)
-    work = np.zeros((max(N_WORK, N_WORK_NEO_HOOKEAN), n))
-    inv_mass = 1.0 / node_mass
-    inv_inertia = 1.0 / inertia
-    # 1/m of the free nodes as the kick scales it, for the stiff dissipative terms taken
-    # implicitly after the kick (_axial_damping, contact.apply_dashpots): 0 at a node held in
-    # all three components, whose impulse then goes to its partner (a held node's infinite
-    # mass)
-    free_inv_mass = inv_mass.copy()
-    for i in (0, n):
-        held = ends.start_held if i == 0 else ends.end_held
-        if held[0] != 0 and held[1] != 0 and held[2] != 0:
-            free_inv_mass[i] = 0.0
-    kick_inv_mass = free_inv_mass.copy()
-    axial_work = np.zeros((N_AXIAL_WORK, n))
-    clamp = np.empty((3, 3))
-    couple = np.empty(8)
-    control_now = np.empty(N_TABLES)
+    (force, torque, dilatation, lengths, radius, energies, work, inv_mass, inv_inertia,
+     free_inv_mass, kick_inv_mass, axial_work, clamp, couple, control_now) = _step_arrays(rod,
+                                                                                          ends)
     (x_build, pairs, x_near, radius_near, near, contact_work, fold_reach, fold_next, dashpots,
-     window_sum, window_squares, window_mean, probe_reference) = _work_arrays(x, rod, ends,
-                                                                                 settings)
+     window_sum, window_squares, window_mean, probe_reference, probe_norm2) = _work_arrays(
+        x, rod, ends, settings, probe_shape)
+    # the running state of contact (_contact_loads), of the settled-shape windows and of the
+    # probe (_settle_windows, _stop_test): typed int64 and bool from the start, as a literal
+    # would have numba compile the callees that take them (not inlined) once more for its type
+    settle_on = stop_at_equilibrium and settle_window > 0.0
+    window_count, window_start, have_mean = np.int64(0), t_start, np.bool_(False)
+    settle_motion, settled = np.inf, np.bool_(False)
     implicit_dashpot = contact_on and settings.implicit_dashpot
     noted = 0
     eta = settings.strain_rate_damping
-    # contact's running state (_contact_loads)
-    n_pairs = 0
-    n_near = 0
-    near_rebuilds = 0
-    near_margin = settings.near_skin  # adapted at each rebuild of the near list
+    n_pairs, n_near, near_rebuilds, rebuilds, max_pairs, touching = 0, 0, 0, 0, 0, 0
     near_age = 0  # steps since the near list was built
-    radius_cut = 0.0
-    rebuilds = 0
-    max_pairs = 0
-    max_penetration = 0.0
-    touching = 0
-    worst = 0.0
-    contact_energy = 0.0
-    residual = np.inf
-    kinetic = np.inf
-    kinetic_before = 0.0
-    # the stability probe of a hold's candidate equilibrium (_stop_test)
-    probe_running = np.bool_(False)
-    probe_norm2 = 0.0
-    for c in range(3):
-        for i in range(n + 1):
-            probe_norm2 += probe_shape[c, i] * probe_shape[c, i]
-    probes = np.int64(0)
-    probes_left = np.int64(0)
+    near_margin = settings.near_skin  # adapted at each rebuild of the near list
+    radius_cut, max_penetration, worst, contact_energy = 0.0, 0.0, 0.0, 0.0
+    residual, kinetic, kinetic_before = np.inf, np.inf, 0.0
+    probe_running, probes, probes_left = np.bool_(False), np.int64(0), np.int64(0)
 
     info[D_SETTLED] = 0.0
-    t = t_start
+    t, steps, status = t_start, 0, S_COMPLETED
     rows = np.int64(0)  # int64 from the start, as window_count above (_record)
-    status = S_COMPLETED
-    steps = 0
 
     # first half drift: positions to t + dt/2
     _drift(x, v, Q, w, 0.5 * dt)
@@ -1529,13 +1560,6 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         disp = table_value(tables.times[T_END_DISPLACEMENT], tables.values[T_END_DISPLACEMENT],
                            tables.counts[T_END_DISPLACEMENT], t)
         _apply_held(x, v, ends, disp, 0.0)
-    info[D_MAX_PENETRATION] = max_penetration
-    info[D_REBUILDS] = rebuilds
-    info[D_MAX_PAIRS] = max_pairs
-    info[D_RESIDUAL] = residual
-    info[D_KINETIC] = kinetic
-    info[D_SETTLE_MOTION] = settle_motion
-    info[D_NEAR_REBUILDS] = near_rebuilds
-    info[D_PROBES] = probes
-    info[D_PROBES_LEFT] = probes_left
+    _report(info, max_penetration, rebuilds, max_pairs, residual, kinetic, settle_motion,
+            near_rebuilds, probes, probes_left)
     return status, steps, t, rows
