@@ -64,6 +64,7 @@ from rodphase.rod import (
     straight_state,
 )
 from rodphase.studytools import machine, write_block
+from rodphase.units import paper_shear_modulus
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -76,7 +77,7 @@ def load_text() -> str:
 
 def rod_for(n: int, E: float) -> Rod:
     return Rod(length=1.0, radius=0.025, elements=n, density=1000.0, youngs_modulus=E,
-               shear_modulus=2.0 * E / 3.0)
+               shear_modulus=paper_shear_modulus(E))
 
 
 DAMPING = {
