@@ -18,6 +18,14 @@ which the strands keep moving, and "explicit", the held plectoneme with the cont
 in the force (as benchmarks/bench_kernel.py runs it) instead of the scene's implicit one. Prints medians and spread (min-max) per
 version and case, and the ratio new/old of the medians. `--elements` runs the same cases at
 other n (each n has its own plectoneme state, made once by OLD's code).
+
+`--pairs N` measures finer: one long-lived process per version and case, warmed once, and N
+timed blocks of --steps steps alternating between the two (old first in even pairs); it
+prints the median of the paired ratios new/old with its quartiles, and the ratio of the
+fastest blocks. On a shared 2-core machine whose speed drifts by 20 % within minutes, the
+rounds' medians above disagreed by 5-10 % between runs of the same code, and 40-120 pairs
+of 20,000 steps put the ratio within about 1 % (2026-12-06, issue #27's 3 % rule; the same
+code against itself: 0.98-1.00).
 """
 
 from __future__ import annotations
@@ -71,6 +79,11 @@ def timed(n):
     r = simulate(p, max_steps=n)
     return time.process_time() - t0, r
 timed(200)  # compile or load the cache
+if len(sys.argv) > 5:  # --pairs: a timed block for each line read
+    for _ in sys.stdin:
+        cpu, r = timed(steps)
+        print(json.dumps({"us_per_step": 1e6 * cpu / r.diagnostics["steps"]}), flush=True)
+    sys.exit()
 cpu, r = timed(steps)
 print(json.dumps({"us_per_step": 1e6 * cpu / r.diagnostics["steps"], "steps": r.diagnostics["steps"],
                   "contacts": float(r.history["contacts"][-1]), "status": r.status,
@@ -86,6 +99,34 @@ def run(root: str, case: str, steps: int, n: int = 150) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def paired(old: str, new: str, case: str, steps: int, n: int, pairs: int) -> None:
+    """N alternating blocks in two long-lived processes; the paired ratios' median."""
+    def start(root):
+        return subprocess.Popen([sys.executable, "-c", CHILD, case, str(steps), STATE.format(n=n),
+                                 str(n), "pairs"], env=dict(os.environ, PYTHONPATH=root),
+                                cwd="/", stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+    def block(proc):
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+        return json.loads(proc.stdout.readline())["us_per_step"]
+
+    procs = {"old": start(old), "new": start(new)}
+    times = {"old": [], "new": []}
+    for k in range(pairs):
+        for version in (("old", "new") if k % 2 == 0 else ("new", "old")):
+            times[version].append(block(procs[version]))
+    for proc in procs.values():
+        proc.stdin.close()
+        proc.wait()
+    ratios = [b / a for a, b in zip(times["old"], times["new"])]
+    q1, median, q3 = statistics.quantiles(ratios, n=4)
+    print(f"{case}@{n:<4d} old median {statistics.median(times['old']):.2f} µs/step, "
+          f"new {statistics.median(times['new']):.2f}; paired new/old: median "
+          f"{statistics.median(ratios):.3f} (quartiles {q1:.3f}-{q3:.3f}), fastest blocks "
+          f"{min(times['new']) / min(times['old']):.3f} ({pairs} pairs)", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("old")
@@ -96,11 +137,19 @@ def main() -> None:
                         help="comma-separated: contact, free, straight, moving, explicit")
     parser.add_argument("--elements", type=int, nargs="+", default=[150],
                         help="rod elements n (each case is run at each n)")
+    parser.add_argument("--pairs", type=int, default=0,
+                        help="alternate N timed blocks between two long-lived processes per "
+                        "case instead of --rounds of fresh ones (see the docstring)")
     args = parser.parse_args()
     cases = [f"{c}@{n}" for n in args.elements for c in args.cases.split(",")]
     for n in args.elements:
         if not os.path.exists(STATE.format(n=n)):
             print(f"making the plectoneme state at n = {n}:", run(args.old, "make", 0, n))
+    if args.pairs:
+        for case in cases:
+            name, n = case.split("@")
+            paired(args.old, args.new, name, args.steps, int(n), args.pairs)
+        return
     times = {(v, c): [] for v in ("old", "new") for c in cases}
     for r in range(args.rounds):
         order = ("old", "new") if r % 2 == 0 else ("new", "old")
