@@ -159,6 +159,21 @@ ControlTables = namedtuple("ControlTables", ["times", "values", "counts"])
 # what advance writes: history (H, N_HISTORY), snap_x (H, 3, n+1), snap_d1 (H, 3, n), info (N_INFO,)
 Output = namedtuple("Output", ["history", "snap_x", "snap_d1", "info"])
 
+# contact's running state from step to step (_contact_loads), besides its arrays (the lists
+# `pairs` and `near`, regrown by it, and their positions at the last builds). Scalars only: a
+# record of arrays passed to an inlined helper costs reference counts at every step (the
+# module docstring).
+ContactState = namedtuple("ContactState", [
+    "n_pairs",  # int: candidate pairs in `pairs` (grid search, midpoint cutoff with a skin)
+    "n_near",  # int: pairs in `near`, those of them within near_margin of touching
+    "radius_cut",  # m: the candidate list holds pairs for radii up to this (1.1 x the widest)
+    "rebuilds",  # int: builds of the candidate list so far
+    "near_rebuilds",  # int: builds of the near list so far
+    "max_pairs",  # int: the most candidate pairs
+    "near_margin",  # m: the near list's gap margin, adapted between near_skin and skin/2
+    "near_age",  # int: steps since the near list was built
+])
+
 # The control tables, one row each: the Controls field it comes from, its unit, its meaning.
 # Row order is the kernel's table index (T_*), derived here as the history's slots are.
 CONTROL_TABLES = (
@@ -684,9 +699,8 @@ def _end_clamp_couple(Q, rod, frame, axis, rotation, dilatation, f_radius_inv, f
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
 def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff,
-                   radius, x_build, x_near, radius_near, pairs, near, n_pairs, n_near,
-                   radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin, near_age, force,
-                   dashpots, contact_work, fold_reach, fold_next):
+                   radius, x_build, x_near, radius_near, pairs, near, state, force, dashpots,
+                   contact_work, fold_reach, fold_next):
     """Self-contact and contact with the end bodies: penalty forces added to `force`.
 
     Two-level Verlet list: `pairs` (grid search, midpoint cutoff with a skin) is rebuilt when
@@ -697,9 +711,12 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
     lists) for apply_dashpots after the kick instead of entering `force`. With settings.fold
     the nodes inside the exclusion are kept from folding through each other (fold_forces,
     work buffers fold_reach and fold_next).
-    Returns the lists and their counters, then (touching pairs, largest overlap / radius,
-    its element, contact energy, the dashpot buffer, dashpots noted in it).
+    state is the lists' ContactState. Returns (pairs, near, the dashpot buffer, the new
+    ContactState, touching pairs, largest overlap / radius, its element, contact energy,
+    dashpots noted in the buffer).
     """
+    (n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs, near_margin,
+     near_age) = state
     n = lengths.shape[0]
     incompressible = settings.incompressible
     exclusion = settings.exclusion
@@ -798,8 +815,9 @@ def _contact_loads(x, v, rod, ends, settings, axis, dilatation, lengths, f_radiu
             contact_energy += body_energy
             if body_worst > worst:
                 worst, worst_at = body_worst, which * (n - 1)
-    return (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
-            near_margin, near_age, touching, worst, worst_at, contact_energy, dashpots, noted)
+    state = ContactState(n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
+                         near_margin, near_age)
+    return (pairs, near, dashpots, state, touching, worst, worst_at, contact_energy, noted)
 
 
 @njit(cache=True, fastmath=_FASTMATH, inline="always")
@@ -1359,10 +1377,10 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
     implicit_dashpot = contact_on and settings.implicit_dashpot
     noted = 0
     eta = settings.strain_rate_damping
-    n_pairs, n_near, near_rebuilds, rebuilds, max_pairs, touching = 0, 0, 0, 0, 0, 0
-    near_age = 0  # steps since the near list was built
-    near_margin = settings.near_skin  # adapted at each rebuild of the near list
-    radius_cut, max_penetration, worst, contact_energy = 0.0, 0.0, 0.0, 0.0
+    contact = ContactState(np.int64(0), np.int64(0), 0.0, np.int64(0), np.int64(0),
+                           np.int64(0), settings.near_skin, np.int64(0))
+    touching = 0
+    max_penetration, worst, contact_energy = 0.0, 0.0, 0.0
     residual, kinetic, kinetic_before = np.inf, np.inf, 0.0
     probe_running, probes, probes_left = np.bool_(False), np.int64(0), np.int64(0)
 
@@ -1448,13 +1466,11 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
                 break
 
         if contact_on or asleep:
-            (pairs, near, n_pairs, n_near, radius_cut, rebuilds, near_rebuilds, max_pairs,
-             near_margin, near_age, touching, worst, worst_at, contact_energy, dashpots,
+            (pairs, near, dashpots, contact, touching, worst, worst_at, contact_energy,
              noted) = _contact_loads(
                 x, v, rod, ends, settings, axis, dilatation, lengths, f_radius, f_stiff, radius,
-                x_build, x_near, radius_near, pairs, near, n_pairs, n_near, radius_cut, rebuilds,
-                near_rebuilds, max_pairs, near_margin, near_age, force, dashpots, contact_work,
-                fold_reach, fold_next)
+                x_build, x_near, radius_near, pairs, near, contact, force, dashpots,
+                contact_work, fold_reach, fold_next)
             if asleep and touching > 0:
                 # hand back the state at t (positions are half a step ahead here); the
                 # overlap is at most one asleep step's closing, as at any first touch
@@ -1560,6 +1576,6 @@ def advance(x, v, Q, w, t_start, n_steps, rod, ends, settings, tables, probe_sha
         disp = table_value(tables.times[T_END_DISPLACEMENT], tables.values[T_END_DISPLACEMENT],
                            tables.counts[T_END_DISPLACEMENT], t)
         _apply_held(x, v, ends, disp, 0.0)
-    _report(info, max_penetration, rebuilds, max_pairs, residual, kinetic, settle_motion,
-            near_rebuilds, probes, probes_left)
+    _report(info, max_penetration, contact.rebuilds, contact.max_pairs, residual, kinetic,
+            settle_motion, contact.near_rebuilds, probes, probes_left)
     return status, steps, t, rows
