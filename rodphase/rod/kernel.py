@@ -52,8 +52,9 @@ Why the step loop is written out in advance rather than a page of calls (issue #
   (numba issues 2345, 2350): static NRT_incref sites in advance 116 → 201 with the loop
   split. The clamp block alone as a helper cost 6 % per step without contact; the loads and
   the kick as helpers 10-18 %, where the issue allows 3 %.
-Only the setup and the end left advance (_drag_rates, _step_arrays, _work_arrays, _report):
-bit-identical with 'reassoc', 0.99-1.02 per step.
+Only the setup and the end left advance (_drag_rates, _step_arrays, _work_arrays, _report),
+and contact's counters travel as one record of scalars (ContactState): bit-identical with
+'reassoc', 0.99-1.02 per step.
 """
 
 from collections import namedtuple
