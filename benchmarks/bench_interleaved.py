@@ -120,7 +120,7 @@ def paired(old: str, new: str, case: str, steps: int, n: int, pairs: int) -> Non
         proc.stdin.close()
         proc.wait()
     ratios = [b / a for a, b in zip(times["old"], times["new"])]
-    q1, median, q3 = statistics.quantiles(ratios, n=4)
+    q1, _, q3 = statistics.quantiles(ratios, n=4)
     print(f"{case}@{n:<4d} old median {statistics.median(times['old']):.2f} µs/step, "
           f"new {statistics.median(times['new']):.2f}; paired new/old: median "
           f"{statistics.median(ratios):.3f} (quartiles {q1:.3f}-{q3:.3f}), fastest blocks "
