@@ -6,7 +6,7 @@ STAMP   = $(VENV)/.installed
 OUT    ?= out
 JOBS   ?= 2
 
-.PHONY: help install demo test lint clean
+.PHONY: help install demo test test-slow test-all lint clean
 
 ##@ Use
 help:  ## list the targets
@@ -34,8 +34,18 @@ demo: $(STAMP)  ## run configs/quick.yaml (a small phase diagram) and draw its p
 	$(BIN)/rodphase plot $(OUT)/quick.h5 --kind phase -o $(OUT)/quick_phase.png
 	@echo "phase map: $(OUT)/quick_phase.png  data: $(OUT)/quick.h5  table: $(OUT)/quick.csv"
 
-test: $(STAMP)  ## run the test suite
-	$(BIN)/pytest -q
+# Two tiers (pyproject.toml's `slow` marker): `make test` runs the tests that guard what a user
+# runs, on every core (pytest-xdist; tests/conftest.py compiles the kernel once before the
+# workers start); the long tier holds the long physics checks, the robustness corpus, the
+# fresh-compile test and the studies' smoke tests. tests/test_tiers.py checks that the two
+# together run every test once.
+test: $(STAMP)  ## the tests that guard what a user runs, on all cores (a few minutes)
+	$(BIN)/pytest -q -n auto -m "not slow"
+
+test-slow: $(STAMP)  ## the long tier alone: what `make test` leaves out
+	$(BIN)/pytest -q -n auto -m slow
+
+test-all: test test-slow  ## every test: `make test`, then the long tier (what CI runs)
 
 lint: $(STAMP)  ## static checks (ruff)
 	$(BIN)/ruff check rodphase tests benchmarks studies

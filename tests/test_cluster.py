@@ -129,6 +129,7 @@ def wait_for(condition, seconds, what):
     raise AssertionError(f"{what} within {seconds} s")
 
 
+@pytest.mark.slow  # a cluster that loses a part waits out its timeouts: 11 s of CPU, 36 s wall
 def test_a_lost_scheduler_stops_with_one_line_and_the_rerun_loses_nothing(cluster, tmp_path):
     samples = 10
     out = tmp_path / "out.h5"
@@ -163,6 +164,7 @@ def test_a_lost_scheduler_stops_with_one_line_and_the_rerun_loses_nothing(cluste
     assert stored(out) == [f"run-{i:05d}" for i in range(samples)]
 
 
+@pytest.mark.slow  # a cluster that loses a part waits out its timeouts: 6 s of CPU, 29 s wall
 def test_a_restarted_scheduler_is_reconnected_to_and_the_sweep_completes(cluster, tmp_path):
     samples = 8
     out = tmp_path / "out.h5"
@@ -188,6 +190,7 @@ def test_a_restarted_scheduler_is_reconnected_to_and_the_sweep_completes(cluster
     assert stored(out) == [f"run-{i:05d}" for i in range(samples)]
 
 
+@pytest.mark.slow  # a cluster that loses a part waits out its timeouts: 5 s of CPU, 21 s wall
 def test_a_worker_that_leaves_mid_run_has_its_runs_redone_elsewhere(cluster, tmp_path):
     samples = 8
     out = tmp_path / "out.h5"
@@ -208,6 +211,7 @@ def test_a_worker_that_leaves_mid_run_has_its_runs_redone_elsewhere(cluster, tmp
     assert stored(out) == [f"run-{i:05d}" for i in range(samples)]
 
 
+@pytest.mark.slow  # a cluster that loses a part waits out its timeouts: 4 s of CPU, 21 s wall
 def test_a_cluster_whose_workers_all_left_stops_with_one_line(cluster, tmp_path):
     out = tmp_path / "out.h5"
     cluster.scheduler()

@@ -77,6 +77,7 @@ def _energy_and_loads(x, Q, arrays, clamps):
     return energies[0] + energies[1], force, torque
 
 
+@pytest.mark.slow  # compiles the neo-Hookean loads on their own (7 s of CPU, 90 s wall under load)
 def test_forces_and_torques_are_the_gradient_of_the_discrete_energy():
     # Central differences of the energy (interior and clamp springs) by node displacements and
     # body rotations of the frames, step h = 1e-6 (m, rad): truncation ~h²·W''' and round-off
@@ -130,6 +131,7 @@ def test_the_law_factors_have_their_closed_forms():
         assert value == pytest.approx(exact, rel=1e-9 if theta > 0.1 else 1e-8)
 
 
+@pytest.mark.slow  # runs the neo-Hookean kernel: its own compile, about a minute of CPU
 def test_static_stretch_follows_the_neo_hookean_tension():
     # Under an end force F the rod relaxes to the uniform stretch of F = EA0/3·(λ − λ⁻²)
     # (units.extension_under_load inverts it). The discrete law is exact for a uniform
@@ -159,7 +161,9 @@ def test_static_stretch_follows_the_neo_hookean_tension():
         assert abs(paper / exact - 1.0) > (0.02 if fraction > 0.3 else 1e-4)
 
 
-@pytest.mark.parametrize("law, power", [("neo_hookean", 1), ("paper", 3)])
+@pytest.mark.parametrize("law, power", [
+    # the neo-Hookean kernel is its own compile (about a minute of CPU): the long tier
+    pytest.param("neo_hookean", 1, marks=pytest.mark.slow), ("paper", 3)])
 def test_torsion_torque_of_a_stretched_rod(law, power):
     # Stretched to λ = 1.2 by its held end and twisted by θ: the end torque is GJ0·Φ/λ,
     # Φ = θ/L0 (neo-Hookean, see rod/neo_hookean.py); the paper's law gives GJ0·Φ/λ³, the
@@ -205,6 +209,7 @@ def _released_arc_energy(law, periods):
     return result, h["stretch_energy"] + h["bend_energy"] + h["kinetic_energy"]
 
 
+@pytest.mark.slow  # runs the neo-Hookean kernel: its own compile, about a minute of CPU
 def test_undamped_energy_is_conserved_over_ten_periods():
     # Issue #13's bound, 1e-3 over 10 periods at n = 100 (3e5 steps of position Verlet);
     # measured 1.6e-4, the O(dt²) oscillation of Verlet's energy, with no drift. The paper's
@@ -217,6 +222,7 @@ def test_undamped_energy_is_conserved_over_ten_periods():
     assert np.abs(energy - energy[0]).max() / energy[0] > 1e-3
 
 
+@pytest.mark.slow  # runs the neo-Hookean kernel: its own compile, about a minute of CPU
 @pytest.mark.parametrize("fraction, buckles", [(0.985, False), (1.015, True)])
 def test_euler_buckling_of_a_cantilever(fraction, buckles):
     # A cantilever under a dead compressive end load F = fraction·π²EI0/(4L0²), started at

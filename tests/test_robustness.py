@@ -42,8 +42,10 @@ MEMORY = os.environ.get("RODPHASE_ROBUSTNESS_MEMORY") == "1"
 # informative rows, reported but judged by another row (parent-sigkill-no-orphans)
 INFORMATIVE = ("kill-9: no worker",)
 
-pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(),
-                                reason="the robustness harness reads /proc (Linux only)")
+# the corpus is the long tier's (make test-all): about 350 s of CPU
+pytestmark = [pytest.mark.skipif(not Path("/proc/self/stat").exists(),
+                                 reason="the robustness harness reads /proc (Linux only)"),
+              pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -314,6 +314,7 @@ def test_grid_finds_exactly_the_pairs_of_the_all_pairs_search():
         assert found == brute_force_pairs(x, 3, 0.05)
 
 
+@pytest.mark.slow  # long: 18 s of CPU
 def test_near_list_holds_exactly_the_candidates_within_the_margin():
     # Random walk with element length 0.01 and radius 0.01: many candidate pairs, a few near.
     # The near list must be the candidates whose capsule gap is below the margin, computed

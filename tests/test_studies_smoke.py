@@ -27,6 +27,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+# the long tier (make test-all): the studies run small took 74 s of CPU together
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 STUDIES = ROOT / "studies"
 BENCHMARKS = ROOT / "benchmarks"

@@ -170,6 +170,7 @@ def test_killed_sweep_resumes_and_keeps_finished_runs_identical(tmp_path):
         assert np.array_equal(positions, after[rid])
 
 
+@pytest.mark.slow  # a local Dask cluster: 13 s of CPU starting it
 def test_dask_local_cluster_gives_the_local_results(tmp_path):
     pytest.importorskip("distributed")
     path = sweep_file(tmp_path, samples=2)

@@ -293,6 +293,7 @@ def test_history_matches_single_frames():
         )
 
 
+@pytest.mark.slow  # compiles the threaded topology, which no test of `make test` needs (16 s CPU)
 @pytest.mark.parametrize("closed", [True, False])
 def test_threaded_kernels_match_serial(monkeypatch, closed):
     # Default thresholds keep these sizes on one thread; force the prange kernels (row
