@@ -3,6 +3,7 @@ what a user runs) and `make test-slow` (the long tier that `make test-all` and C
 run every test that pytest collects, and no test runs in both. A tier's marker expression or
 an option added to one target (a -k, an --ignore, a path) that drops a test fails here."""
 
+import json
 import re
 import shlex
 import subprocess
@@ -23,13 +24,39 @@ def _pytest_options(target: str) -> list[str]:
     return words[1:]
 
 
-def _collected(options: list[str]) -> set[str]:
-    # without the workers (collection is the same) and without the tiers' warm-up compile
-    done = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q",
-                           "-p", "no:xdist", "-p", "no:cacheprovider", *options],
+# one process collects the suite once and selects each tier from it (pytest.main again in
+# the same process reuses the imported test modules: one collection's time, not three)
+COLLECT = r"""
+import json, sys
+import pytest
+
+class Selected:
+    ids = None
+
+    def pytest_collection_finish(self, session):
+        self.ids = [item.nodeid for item in session.items]
+
+found = []
+for options in json.loads(sys.argv[1]):
+    selected = Selected()
+    code = pytest.main(["--collect-only", "-qq", "-p", "no:xdist", "-p", "no:cacheprovider",
+                        *options], plugins=[selected])
+    found.append({"code": int(code), "ids": selected.ids})
+with open(sys.argv[2], "w") as out:
+    json.dump(found, out)
+"""
+
+
+def _collected(selections: list[list[str]], tmp_path) -> list[set[str]]:
+    """The node ids pytest selects with each of `selections` (lists of options)."""
+    out = tmp_path / "collected.json"
+    done = subprocess.run([sys.executable, "-c", COLLECT, json.dumps(selections), str(out)],
                           cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-    return {line for line in done.stdout.splitlines() if "::" in line}
+    found = json.loads(out.read_text())
+    for options, one in zip(selections, found):
+        assert one["code"] == 0, (options, done.stdout[-3000:])
+    return [set(one["ids"]) for one in found]
 
 
 def _without_xdist(options: list[str]) -> list[str]:
@@ -49,10 +76,10 @@ def _without_xdist(options: list[str]) -> list[str]:
     return kept
 
 
-def test_the_fast_and_slow_tiers_partition_the_suite():
-    fast = _collected(_without_xdist(_pytest_options("test")))
-    slow = _collected(_without_xdist(_pytest_options("test-slow")))
-    everything = _collected([])
+def test_the_fast_and_slow_tiers_partition_the_suite(tmp_path):
+    fast, slow, everything = _collected([_without_xdist(_pytest_options("test")),
+                                         _without_xdist(_pytest_options("test-slow")), []],
+                                        tmp_path)
     assert len(everything) > 500  # the suite itself was collected, not an empty selection
     assert fast and slow
     assert not fast & slow, sorted(fast & slow)[:20]
