@@ -12,9 +12,11 @@ rodphase with this interpreter (PYTHONPATH is set to the repository root).
 demo: the three steps of `make demo` (sweep configs/quick.yaml --jobs 2, classify, plot),
 each timed (wall), with the compile seconds the sweep prints ("ready in ..."), and the CPU
 seconds of the sweep's process and the processes it waited for. run: the same for one
-scene. functions: compile_kernel in this process with a listener on numba's compile events:
-wall and CPU seconds of every compiled function, the topology's first (nested: a callee compiled while typing its
-caller is indented under it and counted in the caller's time too).
+scene. functions: compile_kernel in this process with listeners on numba's compile, pass and
+LLVM-lock events: wall and CPU seconds of every compiled function, the topology's and the
+static functions' first (nested: a callee compiled while typing its caller is indented under
+it and counted in the caller's time too), and its CPU split into typing, IR inlining, SSA,
+lowering and LLVM's own time.
 The load average (1/5/15 min) is printed before and after every repeat: the numbers are only
 comparable at a similar load.
 """
@@ -106,8 +108,16 @@ def run(repeats: int) -> None:
             shutil.rmtree(work, ignore_errors=True)
 
 
+# numba's compiler passes, grouped by what they do (the rest are counted as "other")
+PHASES = {"nopython_type_inference": "typing", "inline_inlinables": "IR inlining",
+          "reconstruct_ssa": "SSA", "native_lowering": "lowering"}
+
+
 def functions() -> None:
-    """compile_kernel here, on a fresh cache, with every compile of a dispatcher timed."""
+    """The three compiles of a first run, here, on a fresh cache, one after the other: the
+    topology, the static functions and compile_kernel (which otherwise hands the first two to
+    a second process): every compile of a dispatcher timed, and split into numba's passes and
+    LLVM's own time (the time llvmlite holds its lock: parsing, optimising and emitting)."""
     if "NUMBA_CACHE_DIR" not in os.environ or "rodphase" in sys.modules:
         cache = tempfile.mkdtemp(prefix="numba-cold-")
         try:
@@ -117,39 +127,83 @@ def functions() -> None:
         raise SystemExit(proc.returncode)
     from numba.core import event
 
-    records, stack = [], []
+    records, stack, passes = [], [], []
 
     class Timer(event.Listener):
         def on_start(self, ev):
             records.append(None)  # filled in at the end: callers come before their callees
-            stack.append((len(records) - 1, time.perf_counter(), time.process_time()))
+            stack.append((len(records) - 1, time.perf_counter(), time.process_time(), {}))
 
         def on_end(self, ev):
-            index, t0, c0 = stack.pop()
+            index, t0, c0, phases = stack.pop()
             f = ev.data["dispatcher"].py_func
             records[index] = (len(stack), f"{f.__module__}.{f.__qualname__}",
                               ", ".join(map(str, ev.data["args"])),
-                              time.perf_counter() - t0, time.process_time() - c0)
+                              time.perf_counter() - t0, time.process_time() - c0, phases)
+
+    class Passes(event.Listener):
+        # a pass of the innermost compile (a callee compiled while typing its caller runs
+        # its own passes, inside the caller's typing pass)
+        def on_start(self, ev):
+            passes.append((ev.data["name"], time.process_time(), len(stack)))
+
+        def on_end(self, ev):
+            name, c0, depth = passes.pop()
+            if stack and len(stack) == depth:
+                phase = PHASES.get(name.split(" [")[0], "other")  # "name [function]"
+                phases = stack[-1][3]
+                phases[phase] = phases.get(phase, 0.0) + time.process_time() - c0
+
+    llvm = [0.0]
+
+    class Llvm(event.Listener):
+        def on_start(self, ev):
+            llvm[0] = time.process_time()
+
+        def on_end(self, ev):
+            if stack:
+                phases = stack[-1][3]
+                phases["LLVM"] = phases.get("LLVM", 0.0) + time.process_time() - llvm[0]
 
     event.register("numba:compile", Timer())
+    event.register("numba:run_pass", Passes())
+    event.register("numba:llvm_lock", Llvm())
     load0 = _load()
     from rodphase import topology
+    from rodphase.rod.onset import compile_static
     from rodphase.runner import compile_kernel
 
-    # the topology first, here, so that it is timed too (compile_kernel would hand it to a
-    # second process on an empty cache)
-    c0, t0 = time.process_time(), time.perf_counter()
-    topology.compile_history()
-    print(f"topology (compile_history): {time.perf_counter() - t0:.1f} s wall, "
-          f"{time.process_time() - c0:.1f} s CPU")
+    # the topology and the static functions first, here, so that they are timed too
+    # (compile_kernel would hand them to a second process on an empty cache)
+    for what, compile_them in (("topology (compile_history)", topology.compile_history),
+                               ("static (onset.compile_static)", compile_static)):
+        c0, t0 = time.process_time(), time.perf_counter()
+        compile_them()
+        print(f"{what}: {time.perf_counter() - t0:.1f} s wall, "
+              f"{time.process_time() - c0:.1f} s CPU")
     c0 = time.process_time()
     wall = compile_kernel()
     print(f"then compile_kernel: {wall:.1f} s wall, {time.process_time() - c0:.1f} s CPU; "
           f"load {load0} -> {_load()}")
-    print("own functions (callee lines under their caller; numba's own overloads left out):")
-    for depth, name, args, w, c in records:
-        if name.startswith("rodphase."):
-            print(f"  {'  ' * depth}{w:6.2f} s wall {c:6.2f} s CPU  {name}({args[:100]})")
+    print("own functions (callee lines under their caller; numba's own overloads left out).\n"
+          "CPU s by phase: typing (less the callees compiled meanwhile, their own lines), IR\n"
+          "inlining, SSA, lowering; LLVM: the time llvmlite holds its lock (optimising and\n"
+          "emitting), mostly within lowering; other: numba's other passes:")
+    for i, (depth, name, args, w, c, phases) in enumerate(records):
+        if not name.startswith("rodphase."):
+            continue
+        callees = 0.0
+        for later in records[i + 1:]:
+            if later[0] <= depth:
+                break
+            if later[0] == depth + 1:
+                callees += later[4]
+        typing = max(phases.get("typing", 0.0) - callees, 0.0)
+        split = (f"typing {typing:.1f}, inlining {phases.get('IR inlining', 0.0):.1f}, "
+                 f"SSA {phases.get('SSA', 0.0):.1f}, lowering {phases.get('lowering', 0.0):.1f} "
+                 f"(LLVM {phases.get('LLVM', 0.0):.1f}), other {phases.get('other', 0.0):.1f}")
+        print(f"  {'  ' * depth}{w:6.2f} s wall {c:6.2f} s CPU  {name}({args[:60]})\n"
+              f"  {'  ' * depth}{'':28s}{split}")
     for top in [r for r in records if r[0] == 0]:
         start = records.index(top)
         end = next((i for i in range(start + 1, len(records)) if records[i][0] == 0),
