@@ -593,9 +593,7 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     if not len(negative):
         return Stability(True, 0, lowest, "eigenvalues")
     worst = int(np.argmin(values.real))
-    vector = (vectors[:, worst] * scale).real
-    if not np.any(vector):
-        vector = (vectors[:, worst] * scale).imag
+    vector = (_fixed_phase(vectors[:, worst]) * scale).real
     n = Q.shape[2]
     m = model.positions
     mode = np.zeros((n + 1, 3))
@@ -612,6 +610,27 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
 NEAR_ZERO = 6
 
 
+# ARPACK starts from a random vector unless given one, and its eigenvectors (their phase, and
+# the basis it picks in a degenerate pair's plane) follow that start: the stability push of a
+# hold took its direction from them, so the same run ended straight in one process and as a
+# solenoid in another (issue #46). A fixed, generic start makes every solve a function of A.
+ARNOLDI_START_SEED = 46
+
+
+def _arnoldi_start(size: int) -> np.ndarray:
+    """(size,) the fixed start vector of every Arnoldi solve: seeded normal entries, so that
+    it has a component on any mode (a constant vector can miss one by symmetry)."""
+    return np.random.default_rng(ARNOLDI_START_SEED).standard_normal(size)
+
+
+def _fixed_phase(vector: np.ndarray) -> np.ndarray:
+    """An eigenvector with its arbitrary phase (sign, for a real one) fixed: turned so that
+    its largest entry is real and positive. Its real part is then the same direction whichever
+    solver, start or thread count produced it."""
+    largest = vector[int(np.argmax(np.abs(vector)))]
+    return vector * (abs(largest) / largest) if largest != 0 else vector
+
+
 def _eigenvalues_near_zero(A: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     """The NEAR_ZERO eigenvalues of A nearest zero and their vectors: shift-invert Arnoldi on
     a sparse LU (A is banded in rod order; O(N) per solve), or every eigenvalue of a small A.
@@ -622,7 +641,8 @@ def _eigenvalues_near_zero(A: np.ndarray, size: int) -> tuple[np.ndarray, np.nda
     from scipy.sparse import csc_matrix
     from scipy.sparse.linalg import eigs
 
-    return eigs(csc_matrix(A), k=NEAR_ZERO, sigma=0.0, which="LM", tol=1e-10)
+    return eigs(csc_matrix(A), k=NEAR_ZERO, sigma=0.0, which="LM", tol=1e-10,
+                v0=_arnoldi_start(size))
 
 
 def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarray,
@@ -820,9 +840,10 @@ def soft_factorization(model: StaticModel, x: np.ndarray, Q: np.ndarray,
         inverse = LinearOperator((N, N), matvec=lu.solve, dtype=float)
         inverse_t = LinearOperator((N, N), matvec=lambda b: lu.solve(b, trans="T"),
                                    dtype=float)
-        values, right = eigs(A, k=soft_modes, sigma=0.0, OPinv=inverse, which="LM", tol=1e-8)
+        values, right = eigs(A, k=soft_modes, sigma=0.0, OPinv=inverse, which="LM", tol=1e-8,
+                             v0=_arnoldi_start(N))
         _, left = eigs(A.T.tocsc(), k=soft_modes, sigma=0.0, OPinv=inverse_t, which="LM",
-                       tol=1e-8)
+                       tol=1e-8, v0=_arnoldi_start(N))
     right, left = _real_basis(right, soft_modes), _real_basis(left, soft_modes)
     bordered = splu(bmat([[A, csc_matrix(left)], [csc_matrix(right.T), None]], format="csc"))
     order = np.argsort(-np.abs(values))  # smallest last
