@@ -93,6 +93,27 @@ class _OneLineUsageErrors(click.Group):
         sys.exit(code if isinstance(code, int) else 0)
 
 
+def _warn_once_per_key() -> None:
+    """Config warnings (rodphase.config.ResolutionWarning) as one 'warning:' line each on
+    stderr, once per key: a sweep validates every sample, and 200 samples below the same
+    resolution are one thing to say."""
+    import warnings
+
+    said: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, C.ResolutionWarning):
+            return shown(message, category, filename, lineno, file, line)
+        key = str(message).split(" ", 1)[0]
+        if key not in said:
+            said.add(key)
+            click.echo(f"warning: {message}", err=True)
+
+    shown = warnings.showwarning
+    warnings.showwarning = show
+    warnings.simplefilter("always", C.ResolutionWarning)
+
+
 @click.group(cls=_OneLineUsageErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="rodphase")
 @click.option("-v", "--verbose", count=True,
@@ -104,6 +125,7 @@ def main(verbose):
     extension L/L0 and writes every run to one HDF5 file, which `classify` labels
     (straight, plectoneme, solenoid, mixed) and `plot` draws.
     """
+    _warn_once_per_key()
     if verbose:
         import logging
 

@@ -225,7 +225,12 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "rod": {
         "length": (number(0, strict_min=True, unit="m"), 1.0),
         "radius": (number(0, strict_min=True, unit="m"), 0.025),
-        "elements": (number(4, 5000, integer=True), 100),
+        # auto: from the rod and its twist (resolved_elements); an integer is kept as given
+        "elements": (auto_or(number(4, 5000, integer=True)), "auto"),
+        # what rod.elements: auto aims at: elements this many rest radii long, or shorter
+        "element_length": (number(0.05, 5, unit="rest radii (used by rod.elements: auto)"), 0.5),
+        # how the elements in force were chosen; set by validation (and by --set rod.elements)
+        "elements_from": (choice("auto", "given"), "given"),
         "density": _engine("Rod", "density"),
         "imperfection": (number(0, 1, unit="rest curvature x L0 (RMS, random)"), 1e-3),
         "seed": (number(0, integer=True), 0),
@@ -314,6 +319,10 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "max_steps": (number(1, integer=True, nullable=True), None),
         # a run stopped as under-resolved is run again with twice the elements, up to this
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
+        # the same as a number of doublings of rod.elements (1: up to twice the scene's), so
+        # that the limit follows the rod; the larger of the two limits holds
+        "refinements": (number(0, 6, integer=True, unit="doublings of rod.elements; 0 = none"),
+                        0),
         # a refined run goes on from a second before the trip ("trip") or starts over
         "refine_from": (choice("trip", "start"), "trip"),
         # a run still stopped (clamp lag, resolution, shear) while an end turns is run again
@@ -459,7 +468,71 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
                 values[key] = default.value() if isinstance(default, EngineDefault) else default
         out[section] = Frozen(values)
     _check_scene_consistency(out)
+    out["rod"] = _with_elements(out)  # warns: only once the scene is known to be valid
     return Frozen(out)
+
+
+# ---------------------------------------------------------------- resolution
+
+class ResolutionWarning(UserWarning):
+    """rod.elements was given below what the scene needs (the CLI prints it as a warning)."""
+
+
+# A straight rod twisted by more than this between neighbouring elements is close to the
+# kernel's 135° resolution guard (which counts bend and twist together) before it bends at
+# all: rod.elements: auto keeps 45° below the guard, and fewer elements than 120° per
+# element (15° below it) draw a warning.
+AUTO_TWIST_PER_ELEMENT = math.pi / 2
+LEAST_TWIST_PER_ELEMENT = 2 * math.pi / 3
+
+
+def elements_needed(cfg: dict) -> tuple[int, int, str]:
+    """(auto, least, why) for the scene's rod: `auto` the elements rod.elements: auto takes,
+    the largest of its slenderness over rod.element_length (L0/(h·a0) elements h rest radii
+    long), AUTO_TWIST_PER_ELEMENT of its largest twist, and 8; `least` what a given count
+    must reach without a warning: elements no longer than the radius (L0/a0) where contact
+    is on, LEAST_TWIST_PER_ELEMENT of the twist, and 4; `why` says which decides."""
+    rod = cfg["rod"]
+    slender = rod.length / rod.radius
+    turns = abs(twist_turns(cfg)) if cfg.get("loading") else 0.0
+    angle = units.TURN * turns  # rad of end rotation over the whole rod
+    by_length = math.ceil(slender / rod.element_length - 1e-9)
+    by_twist = math.ceil(angle / AUTO_TWIST_PER_ELEMENT - 1e-9)
+    auto = max(by_length, by_twist, 8)
+    contact = bool(cfg["physics"].self_contact)
+    least_length = math.ceil(slender - 1e-9) if contact else 0
+    least_twist = math.ceil(angle / LEAST_TWIST_PER_ELEMENT - 1e-9)
+    least = max(least_length, least_twist, 4)
+    why = (f"L0/a0 = {slender:.4g}" + (" with self-contact (elements no longer than the "
+                                        "radius)" if contact else "")
+           + f"; {turns:.3g} turns of twist ({math.degrees(LEAST_TWIST_PER_ELEMENT):.0f}° "
+           f"per element at most, the resolution guard trips at 135°)")
+    return min(auto, 5000), least, why
+
+
+def _with_elements(cfg: dict) -> Frozen:
+    """The rod section with rod.elements in force: rod.elements: auto resolved by
+    elements_needed (again at every validation, so that a sweep axis or --set that changes
+    the radius, length or twist changes it), a given count kept (with a ResolutionWarning
+    below what the scene needs). rod.elements_from says which."""
+    import warnings
+
+    rod = dict(cfg["rod"])
+    # elements_from: auto with a count is a resolved config read back (plain()): the count
+    # was auto's, and is recomputed for the rod as it is now
+    auto = rod["elements"] == "auto" or rod["elements_from"] == "auto"
+    rod["elements_from"] = "auto" if auto else "given"
+    if auto:
+        rod["elements"] = 8  # a placeholder for elements_needed, which does not read it
+    probe = dict(cfg, rod=Frozen(rod))
+    wanted, least, why = elements_needed(probe)
+    if auto:
+        rod["elements"] = wanted
+    elif rod["elements"] < least:
+        warnings.warn(f"rod.elements = {rod['elements']} is below the {least} this rod needs "
+                      f"({why}); rod.elements: auto would take {wanted}", ResolutionWarning,
+                      stacklevel=3)
+    return Frozen(rod)
 
 
 def _check_scene_consistency(cfg: dict) -> None:
@@ -529,6 +602,14 @@ def twist_turns(cfg) -> float:
         return units.turns_for_current_twist_density(loading.twist_density_current, rod.radius,
                                                      rod.length, straight_extension(cfg))
     return 0.0
+
+
+def refine_limit(cfg) -> int:
+    """The most elements a run of `cfg` may be refined to: solver.refine_up_to, or
+    rod.elements doubled solver.refinements times, whichever is larger (rod.elements alone:
+    no refinement)."""
+    doubled = cfg["rod"].elements * 2 ** cfg["solver"].refinements
+    return max(cfg["solver"].refine_up_to, doubled)
 
 
 def straight_extension(cfg) -> float:
@@ -621,7 +702,13 @@ def parse_override(item: str) -> tuple[str, Any]:
 
 def apply_overrides(data: dict, overrides: dict[str, Any] | list[tuple[str, Any]]) -> dict:
     data = copy.deepcopy(data)
-    items = overrides.items() if isinstance(overrides, dict) else overrides
+    items = list(overrides.items() if isinstance(overrides, dict) else overrides)
+    # setting rod.elements says how it is chosen: a count is given, auto is auto (a resolved
+    # config carries rod.elements_from, which would otherwise keep the old choice)
+    for key, value in list(items):
+        if key in ("rod.elements", "scene.rod.elements"):
+            items.append((key.rsplit(".", 1)[0] + ".elements_from",
+                          "auto" if value in ("auto", None) else "given"))
     for key, value in items:
         node = data
         parts = key.split(".")
@@ -824,7 +911,13 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     ("solver", "slow_down_to"): 0.0,
     # the contact thinning force made optional (issue #29): on by default, so no hash moved
     ("contact", "thinning_force"): True,
+    # refinement as doublings (issue #46): off by default, so no hash moved
+    ("solver", "refinements"): 0,
 }
+
+# keys that say how a value in force was chosen, not what runs (issue #46: rod.elements: auto
+# resolves to a count, and the count is hashed): left out of every hash
+HASH_OMITTED = {("rod", "element_length"), ("rod", "elements_from")}
 
 
 def _hash_view(part: dict) -> dict:
@@ -833,7 +926,8 @@ def _hash_view(part: dict) -> dict:
     for section, values in part.items():
         if isinstance(values, dict):
             values = {k: v for k, v in values.items()
-                      if not ((section, k) in HASH_NEUTRAL and HASH_NEUTRAL[section, k] == v)}
+                      if not ((section, k) in HASH_NEUTRAL and HASH_NEUTRAL[section, k] == v)
+                      and (section, k) not in HASH_OMITTED}
         out[section] = values
     return out
 

@@ -143,11 +143,12 @@ def run_column(column: Column) -> list[RunResult]:
         if i not in rest:
             results[i] = _tagged(run_scene(column.scenes[i]), column, i, onset, REACHED_ALONE)
     incompressible = first.material.incompressible
-    elements, most = first.rod.elements, max(first.rod.elements, first.solver.refine_up_to)
+    elements, most = first.rod.elements, C.refine_limit(first)
     lost = 0.0  # s, the wall time of path runs that finished no sample
     while rest:
         # refinement is this loop's: the run itself must not redo the column from the start
-        cfg = _with(first, **{"rod.elements": elements, "solver.refine_up_to": elements})
+        cfg = _with(first, **{"rod.elements": elements, "solver.refine_up_to": elements,
+                              "solver.refinements": 0})
         run = run_scene(cfg, twist_targets=[column.targets[i] for i in rest])
         done = reached_samples(run)
         jump = jump_turns(run)
