@@ -26,10 +26,12 @@ LAYERS = [
     # the rod engine: compiled laws, the time-stepping kernel, its driver and the static side
     ["rod._jit", "rod.rotation", "rod.contact", "rod.neo_hookean", "rod.kernel",
      "rod.model", "rod.static", "rod.simulate", "rod", "theory", "rod.onset"],
+    # the config's words, validated (it reads only units): a table reads a store's config
+    ["config"],
     # reading a finished shape: link/twist/writhe, alignment, labels, tables of labels
     ["topology", "analysis", "classify", "tabulate"],
-    # from the config's words to a scene the engine can run
-    ["config", "scenes"],
+    # from the config to a scene the engine can run
+    ["scenes"],
     # the store, and starting a run from a stored state
     ["store", "restart"],
     # running: one scene, one path of the map, a sweep of many
