@@ -253,6 +253,9 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     from .sweep import ClusterLost, plan, run_sweep
 
     sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
+    if sweep_cfg.sampler == "boundaries":
+        raise C.ConfigError("sweep.sampler", "boundaries", "a sampler of points; the boundaries "
+                            "sampler places its runs by bracketing: rodphase boundaries")
     checked_initial_state(scene_cfg)
     check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
     try:
@@ -293,6 +296,75 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
         click.echo("  (a not_converged run keeps its final shape: it is classified, and its "
                    "status says the hold ran out of time)")
     sys.exit(0 if report.failed == 0 else 1)
+
+
+@main.command()
+@click.argument("sweep_file", metavar="SWEEP.yaml", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="HDF5 file of the runs the trace places (an ordinary sweep store, with the "
+              "boundaries kept under /boundaries); rerunning into it resumes.")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
+              help="Also write the boundaries as CSV: one row per boundary point (kind, "
+              "extension, twist_density and their brackets).")
+@click.option("--only", type=click.Choice(["onset"]), default=None,
+              help="onset: only the straight rod's onset line, from the model's static "
+              "stability (seconds, no runs, nothing stored).")
+@click.option("--tolerance", type=float, default=None,
+              help="Width in L/L0 of a plectoneme-solenoid bracket [default 0.005].")
+@click.option("--twist-tolerance", type=float, default=None,
+              help="Width in Phi*a of the triple point's bracket [default 0.05].")
+@click.option("--levels", type=int, default=None,
+              help="Twist levels of the first round, spread over the box [default 6].")
+@click.option("--jobs", "-j", default=2, show_default=True, type=click.IntRange(1, 4096),
+              help="Parallel workers (processes).")
+@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
+              show_default=True, help="loky: processes on this machine; dask: a Dask cluster.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Dask scheduler address (tcp://host:8786); default: a local cluster.")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@reports_errors
+def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, levels, jobs,
+               backend, scheduler, sets, quiet, force):
+    """Trace the phase diagram's lines: the straight rod's onset, the plectoneme-solenoid
+    boundary and the triple point, each with its bracket.
+
+    The sweep's axes (twist_density Phi*a and extension L/L0) give the box, its scene and
+    `set` the rod and protocol; its sampler and samples do not apply. The onset comes from
+    the model's own stability (no dynamics); the boundary from runs of the scene's protocol
+    placed by bisection along lines of constant twist, until each bracket is narrower than
+    --tolerance in L/L0.
+
+    \b
+    Example:
+      rodphase boundaries fig3_paper -o out/fig3_lines.h5 --csv out/fig3_lines.csv
+      rodphase boundaries fig3_paper -o out/onset.h5 --only onset --set rod.radius=0.0125
+    """
+    from .boundaries import summary, sweep_for_boundaries, trace
+
+    settings = {"tolerance": tolerance, "twist_tolerance": twist_tolerance, "levels": levels}
+    sweep_cfg, scene_cfg = sweep_for_boundaries(sweep_file, _overrides(sets), settings)
+    found = trace(sweep_cfg, scene_cfg, output, only_onset=only == "onset", jobs=jobs,
+                  backend=backend, scheduler=scheduler, echo=click.echo, replace=force,
+                  progress=not quiet and sys.stderr.isatty())
+    if found.report is not None and found.report.stopped_by:
+        import signal
+
+        click.echo(f"stopped by {found.report.stopped_by}: the runs finished so far are "
+                   f"stored in {output}; run the same command to go on.", err=True)
+        sys.exit(128 + signal.Signals[found.report.stopped_by].value)
+    click.echo(summary(found))
+    if found.report is None:
+        click.echo(f"onset line in {found.onset_seconds:.2f} CPU s (no runs)")
+    else:
+        r = found.report
+        click.echo(f"{r.done} runs ok, {r.failed} failed, {r.skipped} reused of {r.total} in "
+                   f"{r.wall:.1f} s; runs and boundaries in {output}")
+    if csv_path:
+        C.make_output_folder(csv_path)
+        found.table.to_csv(csv_path, index=False, float_format="%.10g")
+        click.echo(f"boundaries: {csv_path}")
 
 
 @main.command()
@@ -377,8 +449,8 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above, se
               help="Phase map: the straight rod's buckling twist along L/L0, the model's own "
                    "(from its stiffness, at the sweep's resolution), the sheared and the unsheared "
                    "clamped Greenhill twist (for a rod clamped at both ends under an end load), "
-                   "and the measured critical twist per extension bin with its straight-line "
-                   "fit above L/L0 = 1.1.")
+                   "and the boundaries `rodphase boundaries` traced into the store (the "
+                   "plectoneme-solenoid line with its bracket, the triple point).")
 @reports_errors
 def plot(store_file, kind, output, run_id, experiments, twist, background, size, caption,
          theory):
@@ -465,14 +537,9 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                 # 13 points (an onset each): phase_map draws a spline through them
                 lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12
                                              for i in range(13)])
-            critical = None
-            if theory and {"extension", "phase", column} <= set(table.columns):
-                from .tabulate import critical_twist
-
-                critical = critical_twist(table.assign(extension=table["extension"].astype(float)),
-                                          column)
+            traced = store.boundaries() if theory else None
             P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
-                        onset=lines, critical=critical)
+                        onset=lines, lines=traced)
         elif kind == "path":
             from .tabulate import path_table
 

@@ -411,14 +411,38 @@ SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
     "scene": (text, REQUIRED),
     "set": (None, {}),
     "axes": (None, REQUIRED),
-    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive", "paths"),
-                "random"),
+    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive", "paths",
+                       "boundaries"), "random"),
     "samples": (number(1, 100000, integer=True), 12),
     "seed": (number(0, integer=True), 0),
     # the paths sampler's count of columns (loads); null: the square root of samples. Only
     # kept when given, so that no other sweep's hash moves
     "columns": (number(1, 100000, integer=True, nullable=True), None),
+    # the boundaries sampler's settings (rodphase boundaries, boundaries.Settings); only kept
+    # when given, so that no other sweep's hash moves
+    "boundary": (lambda path, value: boundary_settings(path, value), None),
 }
+
+BOUNDARY_SCHEMA: dict[str, Check] = {
+    "tolerance": number(1e-4, 0.1, strict_min=False, unit="L/L0, the width of a "
+                        "plectoneme-solenoid bracket"),
+    "twist_tolerance": number(1e-3, 1.0, unit="Phi*a, the width of the triple point's bracket"),
+    "levels": number(2, 40, integer=True, unit="twist levels of the first round"),
+}
+
+
+def boundary_settings(path: str, value: Any) -> Frozen | None:
+    """sweep.boundary: a mapping of BOUNDARY_SCHEMA's keys, each checked."""
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise ConfigError(path, value, "a mapping of " + ", ".join(BOUNDARY_SCHEMA))
+    out = {}
+    for key, item in value.items():
+        if key not in BOUNDARY_SCHEMA:
+            raise _unknown(f"{path}.", key, BOUNDARY_SCHEMA, item)
+        out[key] = BOUNDARY_SCHEMA[key](f"{path}.{key}", item)
+    return Frozen(out)
 
 # sweep axes in the paper's dimensionless units and where they go in the scene
 AXES = {
@@ -864,6 +888,10 @@ def validate_sweep(raw: Any) -> Frozen:
     if "extension" in checked and "force_multiple" in checked:
         raise ConfigError("sweep.axes.force_multiple", checked["force_multiple"],
                           "not together with extension (both set the load)")
+    if out.get("boundary") is None:
+        out.pop("boundary", None)
+    elif out["sampler"] != "boundaries":
+        raise ConfigError("sweep.boundary", out["boundary"], "only with sweep.sampler: boundaries")
     if out["columns"] is None:
         del out["columns"]
     elif out["sampler"] != "paths":

@@ -642,6 +642,39 @@ class Store:
         finally:
             self._refresh()
 
+    def write_boundaries(self, df: pd.DataFrame, units: dict[str, tuple[str, str]],
+                         settings: dict) -> None:
+        """Store the traced boundaries (rodphase.boundaries.lines) under /boundaries, one
+        1-D dataset per column (with its `units` and `long_name`), replacing earlier ones;
+        `settings` (what made them) as the group's attributes."""
+        self._need_writer()
+        self.merge()
+        try:
+            with self._rewritten(2 * int(df.memory_usage(deep=True).sum()) + (1 << 18)) as f:
+                if "boundaries" in f:
+                    del f["boundaries"]
+                g = f.create_group("boundaries", track_order=True)
+                for name in df.columns:
+                    g.create_dataset(str(name), data=_column_array(df[name]))
+                    unit, meaning = units.get(str(name), ("", ""))
+                    g[str(name)].attrs["units"] = unit
+                    if meaning:
+                        g[str(name)].attrs["long_name"] = meaning
+                g.attrs["columns"] = [str(c) for c in df.columns]
+                for key, value in settings.items():
+                    g.attrs[key] = value
+        finally:
+            self._refresh()
+
+    def boundaries(self) -> pd.DataFrame | None:
+        """The stored boundaries table (write_boundaries), or None; its settings in attrs."""
+        if self.file is None or "boundaries" not in self.file:
+            return None
+        g = self.file["boundaries"]
+        table = _read_classification(g)
+        table.attrs.update({k: _plain(v) for k, v in g.attrs.items() if k != "columns"})
+        return table
+
     def classification(self) -> pd.DataFrame | None:
         if self.file is None or "classification" not in self.file:
             return None

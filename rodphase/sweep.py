@@ -95,7 +95,10 @@ def _paths(axes: dict, samples: int, seed: int, columns: int | None = None) -> n
 
 
 SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "sobol": _sobol, "grid": _grid,
-                                 "continuation": _grid, "adaptive": _lhs, "paths": _paths}
+                                 "continuation": _grid, "adaptive": _lhs, "paths": _paths,
+                                 # the boundaries sampler places its runs by bracketing
+                                 # (boundaries.boundary_rounds); its grid only checks the box
+                                 "boundaries": _grid}
 
 
 def sample_points(sweep) -> list[dict[str, float]]:
@@ -323,8 +326,12 @@ class SweepReport:
 def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "loky",
               scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
               progress: bool = True, echo: Callable[[str], None] = print,
-              reconnect_timeout: float = RECONNECT_TIMEOUT) -> SweepReport:
+              reconnect_timeout: float = RECONNECT_TIMEOUT,
+              rounds_of: Callable | None = None) -> SweepReport:
     """Run every missing sample of the sweep into the store at `out_path` (resuming).
+
+    `rounds_of(store)`, if given, yields the rounds of jobs instead of the sampler (each
+    round is run into the store before the next is made: boundaries.boundary_rounds).
 
     Each finished run is durable in the store as soon as it arrives (see store.py). SIGINT and
     SIGTERM stop the sweep: the workers are killed, what finished is kept, and the report's
@@ -368,7 +375,7 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
                         pool = stack.enter_context(
                             _pool(backend, scheduler, jobs, reconnect_timeout))
                     _run_rounds(sweep, scene, store, pool, retry_failed, progress, report,
-                                echo, out_path)
+                                echo, out_path, rounds_of)
                 except ClusterLost as exc:
                     exc.stored = len(store.run_ids())
                     exc.total = max(report.total, exc.stored)
@@ -381,9 +388,14 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
     return report
 
 
-def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path):
-    rounds = adaptive_rounds(sweep, scene, store) if sweep.sampler == "adaptive" else [
-        plan(sweep, scene)]
+def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path,
+                rounds_of=None):
+    if rounds_of is not None:
+        rounds = rounds_of(store)
+    elif sweep.sampler == "adaptive":
+        rounds = adaptive_rounds(sweep, scene, store)
+    else:
+        rounds = [plan(sweep, scene)]
     for all_jobs in rounds:
         finished = store.done_ids(include_failed=not retry_failed)
         todo = [j for j in all_jobs if not set(j.run_ids) <= finished]

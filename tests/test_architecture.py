@@ -34,8 +34,8 @@ LAYERS = [
     ["scenes"],
     # the store, and starting a run from a stored state
     ["store", "restart"],
-    # running: one scene, one path of the map, a sweep of many
-    ["runner", "paths", "sweep"],
+    # running: one scene, one path of the map, a sweep of many, the lines traced by runs
+    ["runner", "paths", "sweep", "boundaries"],
     # drawing
     ["plot"],
     # what users call: the Python API, the helpers of studies/, the CLI, the package
