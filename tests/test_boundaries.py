@@ -169,3 +169,21 @@ def test_a_small_trace_finds_a_boundary_stores_its_runs_and_resumes(tmp_path):
     pd.testing.assert_frame_equal(again.table, first.table)
     ps = first.table[first.table["kind"] == "plectoneme_solenoid"]
     assert np.all(ps["extension_high"] - ps["extension_low"] <= 0.04 + 1e-12)
+
+
+def test_another_filaments_onset_line_follows_its_own_rod():
+    # half the radius: auto takes 160 elements, and the line is that rod's, within a few
+    # tenths of a percent of its sheared Greenhill twist (the model's n -> inf limit). In
+    # the paper's units it nearly coincides with the paper's rod's: for a long rod
+    # Phi*a_c = 2 sqrt(B T) a / C depends on the extension alone (B, T, C ~ a^4, a^2, a^4);
+    # the thin rod's lies a little lower (0.3 %), the clamps' finite-length share smaller
+    settings = B.Settings(onset_points=3)
+    thin_sweep, thin = B.sweep_for_boundaries("fig3_paper", [("rod.radius", 0.0125)])
+    assert thin.rod.elements == 160
+    line = B.onset_line(thin, thin_sweep, settings).iloc[1:]
+    assert np.allclose(line["twist_density"], line["greenhill_sheared"], rtol=0.01)
+    assert np.all(line["twist_density"] <= line["greenhill_sheared"])
+    paper_sweep, paper = B.sweep_for_boundaries("fig3_paper")
+    paper_line = B.onset_line(paper, paper_sweep, settings).iloc[1:]
+    assert np.allclose(line["twist_density"], paper_line["twist_density"], rtol=0.01)
+    assert np.all(line["twist_density"] < paper_line["twist_density"])
