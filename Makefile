@@ -107,7 +107,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 	$(BIN)/python benchmarks/reference_positions.py --compare $(OUT)/positions_base.npz $(OUT)/positions_here.npz
 
 ##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
-.PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
+.PHONY: phase fig3 lines figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
 	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
 	static-path hold-budget energy-audit
@@ -124,6 +124,11 @@ fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, wit
 	$(BIN)/rodphase classify $(OUT)/fig3_paper.h5 --csv $(OUT)/fig3_paper.csv
 	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
 	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
+
+lines: $(STAMP)  ## Fig 3 as lines: the onset, the plectoneme-solenoid boundary and the triple point, with brackets
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase boundaries fig3_paper -o $(OUT)/fig3_lines.h5 --csv $(OUT)/fig3_lines.csv --jobs $(JOBS) --quiet
+	$(BIN)/rodphase plot $(OUT)/fig3_lines.h5 --kind phase -o $(OUT)/fig3_lines.png
 
 figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)
 	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
