@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Kernel benchmark: µs per time step of rodphase against PyElastica 1.0, same scene, same dt.
 
-    python benchmarks/bench_kernel.py [--write docs/benchmarks.md] [--quick]
+    python benchmarks/bench_kernel.py [--write docs/history/benchmarks.md] [--quick]
 
 The scene (DESIGN.md §7) is the paper's rod, L0 = 1 m, a = 0.025 m, E = 1 MPa, G = 2E/3
 (= E/(1+ν) with ν = ½, as PyElastica's examples write it), ρ = 1000 kg/m³, clamped at node 0;

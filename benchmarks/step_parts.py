@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Where a Fig 3 step goes, and what a Newton iteration on the same rod would cost.
 
-    python benchmarks/step_parts.py [--point 2.447,1.056] [--elements 80] [--write docs/performance.md]
+    python benchmarks/step_parts.py [--point 2.447,1.056] [--elements 80] [--write docs/history/performance.md]
 
 Issue #16 asks for Fig 3 in 20 s. Most of its CPU is the twist ramp of the runs that buckle
 into plectonemes, at 80 elements with self-contact. This script takes one such run (by

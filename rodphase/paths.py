@@ -27,7 +27,7 @@ contact (rod/static.py, its docstring: neutral sliding modes, a creeping solenoi
 corrector converges there only beside those soft modes (static.solve_beside_soft_modes), and
 they are how the shape takes up twist: a static path in twist fails after 0 to 0.1 of Φa in
 steps of 0.005, and where it runs it costs 10-30 times what the kernel's ramp and hold cost
-per unit of twist (docs/performance.md, "A twist continuation beside the soft modes"). The
+per unit of twist (docs/history/performance.md, "A twist continuation beside the soft modes"). The
 onset, where the branch does have an isolated equilibrium, is static.
 
 Each sample's result records its place on the path (diagnostics["path"]): the column, its

@@ -7,7 +7,7 @@ boundary, the straight rod's loss of stability, without a sweep:
 
     python studies/onset_study.py                     # table to stdout, n = 80
     python studies/onset_study.py --write             # also docs/img/onset_study.png and the
-                                                      # table block of docs/reproduction.md
+                                                      # table block of docs/history/reproduction.md
     make onset-study                                  # the same as --write
 
 Variants: the paper's rod; its shear stiffness (4GA/3) × 10 and × 100; G = E/3 (the textbook

@@ -13,7 +13,7 @@ damaged HDF5 file can crash the reader, and that crash is then a finding, not th
 the harness.
 
     python studies/robustness.py                       # every case, 60 kill points
-    python studies/robustness.py --kills 60 --write docs/robustness.md
+    python studies/robustness.py --kills 60 --write docs/explanation/robustness.md
     python studies/robustness.py --cases kill-9-during-write memory-300-runs
 
 tests/test_robustness.py imports this file (importlib, by path) and runs each case as one
