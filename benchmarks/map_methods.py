@@ -110,7 +110,7 @@ def compare(rounds: int, jobs: int, write: bool, methods=DEFAULT_METHODS,
     text = "\n".join(lines)
     print(text)
     if write:
-        write_block(ROOT / "docs" / "performance.md", block, text)
+        write_block(ROOT / "docs" / "history" / "performance.md", block, text)
 
 
 def machine_line(before: dict, after: dict) -> str:
