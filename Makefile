@@ -6,7 +6,7 @@ STAMP   = $(VENV)/.installed
 OUT    ?= out
 JOBS   ?= 2
 
-.PHONY: help install demo test lint clean
+.PHONY: help install demo test lint clean docs docs-serve
 
 ##@ Use
 help:  ## list the targets
@@ -40,13 +40,24 @@ test: $(STAMP)  ## run the test suite
 lint: $(STAMP)  ## static checks (ruff)
 	$(BIN)/ruff check rodphase tests benchmarks studies
 
+DOCS_STAMP = $(VENV)/.docs-installed
+$(DOCS_STAMP): $(STAMP) pyproject.toml $(CONSTRAINTS)
+	$(BIN)/pip install --quiet -e ".[docs]" $(if $(CONSTRAINTS),-c $(CONSTRAINTS))
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)  ## build the docs site into out/site (strict: a warning or a broken link fails)
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/mkdocs build --strict --quiet
+
+docs-serve: $(DOCS_STAMP)  ## serve the docs at http://127.0.0.1:8000, rebuilt on every edit
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/mkdocs serve
+
 clean:  ## remove outputs (keeps .venv)
 	rm -rf $(OUT) .pytest_cache
 
 ##@ Benchmarks (benchmarks/; the timings depend on the machine and its load, see docs/history/benchmarks.md)
 # `make bench` is the four that docs/history/benchmarks.md reports; each script also has its own target.
 .PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
-	bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
+	current-fig3 bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
 	bit-identical base-tree
 BASE ?= main
 BASE_TREE = $(OUT)/base-rodphase
@@ -71,6 +82,9 @@ bench-map: $(STAMP)  ## Fig 3's sweep timed, labels against a finer reference, p
 bench-compile: $(STAMP)  ## first compile on an empty numba cache: make demo's steps, then per function
 	$(BIN)/python benchmarks/compile_time.py demo --jobs $(JOBS)
 	$(BIN)/python benchmarks/compile_time.py functions
+
+current-fig3: $(STAMP)  ## Fig 3 as it ships: time, labels, fit into docs/current.json, the map into docs/img
+	$(BIN)/python benchmarks/current_fig3.py --jobs $(JOBS)
 
 bench-overhead: $(STAMP)  ## what a stored run costs beyond its simulation (2,000 tiny runs)
 	$(BIN)/python benchmarks/bench_overhead.py --jobs $(JOBS)

@@ -1,0 +1,141 @@
+"""Reference pages generated from the code at every docs build (mkdocs-gen-files runs this):
+the commands from click, the config keys from rodphase.config's schema. Nothing here is
+written by hand, so the pages cannot drift from the code. `python docs/gen_reference.py`
+prints them (tests/test_docs.py renders them the same way)."""
+
+from __future__ import annotations
+
+import click
+
+
+def allowed(check) -> str:
+    """What a schema check accepts, in its own words: the text of the ConfigError it raises
+    for a value no check accepts."""
+    from rodphase.config import ConfigError
+
+    if check is None:
+        return "a mapping"
+    try:
+        check("key", object())
+    except ConfigError as error:
+        return error.allowed
+    return "anything"
+
+
+def default_text(default) -> str:
+    from rodphase.config import REQUIRED, EngineDefault
+
+    if default is REQUIRED:
+        return "required"
+    if isinstance(default, EngineDefault):
+        default = default.value()
+    if default is None:
+        return "null"
+    if isinstance(default, bool):
+        return str(default).lower()
+    if isinstance(default, tuple):
+        return "[" + ", ".join(f"{v:g}" for v in default) + "]"
+    if isinstance(default, float):
+        return f"{default:g}"
+    return str(default) if default != {} else "{}"
+
+
+def cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def config_page() -> str:
+    from rodphase import config
+
+    out = ["# Config keys", "",
+           "Generated from `rodphase.config` (`SCENE_SCHEMA`, `SWEEP_SCHEMA`, `AXES`, `MEANINGS`) "
+           "at every docs build. Units are SI unless the allowed values say otherwise; *auto* "
+           "means the engine derives the value. Any key can be changed without editing a file: "
+           "`--set section.key=value` on the command line, `{\"section.key\": value}` from "
+           "Python. `rodphase config NAME` prints a scene or sweep with every default filled in.",
+           "", "A **scene** YAML has the sections below (and `scene`, `description`, the optional "
+           "`initial_state: \"FILE.h5#RUN_ID\"` to start from a stored run); a **sweep** YAML "
+           "has one section, `sweep`.", ""]
+    for section, fields in config.SCENE_SCHEMA.items():
+        out += [f"## {section}", "", "| key | default | allowed | meaning |", "|---|---|---|---|"]
+        for key, (check, default) in fields.items():
+            out.append(f"| `{section}.{key}` | {cell(default_text(default))} | "
+                       f"{cell(allowed(check))} | {cell(config.MEANINGS[f'{section}.{key}'])} |")
+        out.append("")
+    out += ["## sweep", "", "| key | default | allowed | meaning |", "|---|---|---|---|"]
+    for key, (check, default) in config.SWEEP_SCHEMA.items():
+        out.append(f"| `sweep.{key}` | {cell(default_text(default))} | {cell(allowed(check))} | "
+                   f"{cell(config.MEANINGS[f'sweep.{key}'])} |")
+    out += ["", "### sweep.axes", "", "Each axis is `name: [low, high]` in the paper's "
+            "dimensionless units and sets one scene key.", "",
+            "| axis | allowed | sets |", "|---|---|---|"]
+    for name, (check, target) in config.AXES.items():
+        out.append(f"| `{name}` | {cell(allowed(check))} | `{target}` |")
+    return "\n".join(out) + "\n"
+
+
+def cli_page() -> str:
+    from rodphase.cli import main
+
+    root = click.Context(main, info_name="rodphase")
+    out = ["# Commands", "",
+           "Generated from the click commands of `rodphase.cli` at every docs build: each "
+           "section is that command's `--help`. Exit statuses: "
+           "[statuses and exit codes](statuses.md).", "",
+           "```text", main.get_help(root), "```", ""]
+    for name in sorted(main.list_commands(root)):
+        command = main.get_command(root, name)
+        context = click.Context(command, info_name=name, parent=root)
+        out += [f"## rodphase {name}", "", "```text", command.get_help(context), "```", ""]
+    return "\n".join(out)
+
+
+def guards_page() -> str:
+    from rodphase.rod.kernel import GUARDS
+
+    out = ["# Guards", "",
+           "Generated from `rodphase.rod.kernel.GUARDS` at every docs build. A guard that trips "
+           "stops the run with status `unstable`; the run's `diagnostics[\"guard\"]` holds the "
+           "short name, `diagnostics[\"where\"]` the index named below, and its message says "
+           "what to change. How each guard is acted on: [statuses](statuses.md).", "",
+           "| guard | what tripped | where points at | what to change |", "|---|---|---|---|"]
+    for guard in GUARDS.values():
+        out.append(f"| `{guard.name}` | {cell(guard.message)} | {cell(guard.where)} | "
+                   f"{cell(guard.advice)} |")
+    out += ["| `time_step` | a fixed `solver.dt` above the stable bound, named as the cause of "
+            "any guard above | | Leave `solver.dt` auto, or lower it below the bound the "
+            "message gives. |", "| `link` | both ends clamped, and the final link differs from "
+            "the turns put in plus the recorded escapes by more than 0.05 turns | | As for "
+            "`resolution`. |", ""]
+    return "\n".join(out)
+
+
+PAGES = {"reference/cli.md": cli_page, "reference/config.md": config_page,
+         "reference/guards.md": guards_page}
+
+try:
+    import mkdocs_gen_files
+except ImportError:  # run by hand or by a test
+    mkdocs_gen_files = None
+
+# pages that the nav names and that another change is writing: a stand-in until they land
+# (the real file wins as soon as it exists)
+PENDING = {"explanation/twist-into-writhe.md": (
+    "# Twist into writhe, against PyElastica\n\nThe comparison of Fig 2a, 2b and 4a with the "
+    "authors' own code (PyElastica 1.0) is being written. Until then: "
+    "[validation](validation.md) and the [dated cross-check](../history/reproduction.md"
+    "#cross-check-against-the-authors-own-code-pyelastica-10).\n")}
+
+if mkdocs_gen_files is not None and __name__ != "__main__":
+    from pathlib import Path
+
+    for path, render in PAGES.items():
+        with mkdocs_gen_files.open(path, "w") as page:
+            page.write(render())
+    for path, text in PENDING.items():
+        if not (Path(__file__).parent / path).exists():
+            with mkdocs_gen_files.open(path, "w") as page:
+                page.write(text)
+elif __name__ == "__main__":
+    for render in PAGES.values():
+        print(render())
