@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from . import config as C
+from . import config
 from .result import RunResult, rotation_put_in
 from .runner import REFINABLE_GUARDS, finished_holds, run_scene, split_continuation
 from .units import TURN
@@ -68,7 +68,7 @@ def onset_of(cfg) -> float:
     from .rod.onset import straight_onset_turns
     from .scenes import rod_from
 
-    return straight_onset_turns(rod_from(cfg), C.straight_extension(cfg), tolerance=1e-6)
+    return straight_onset_turns(rod_from(cfg), config.straight_extension(cfg), tolerance=1e-6)
 
 
 def reached_samples(result: RunResult) -> int:
@@ -97,7 +97,7 @@ def jump_turns(run: RunResult) -> float | None:
 def _with(cfg, **values):
     from .scenes import SCENES
 
-    return C.validate_scene(C.apply_overrides(cfg.plain(), list(values.items())), SCENES)
+    return config.validate_scene(config.apply_overrides(cfg.plain(), list(values.items())), SCENES)
 
 
 def _tagged(result: RunResult, column: Column, rank: int, onset: float, reached: str,

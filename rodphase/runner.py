@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from . import config as C
+from . import config
 from .result import RunResult, rotation_put_in
 from .rod.model import Problem
 from .rod.simulate import clamp_reference, current_radii
@@ -286,7 +286,7 @@ def run_scene(scene, *, topology: bool | None = None,
     SLOWABLE_GUARDS); `twist_targets` (turns) makes it a continuation."""
     from .scenes import SCENES, build
 
-    cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
+    cfg = scene if isinstance(scene, config.Frozen) else config.validate_scene(scene, SCENES)
     extra = {} if twist_targets is None else {"twist_targets": twist_targets}
     want_topology = cfg.output.topology if topology is None else topology
 
@@ -322,7 +322,7 @@ def run_scene(scene, *, topology: bool | None = None,
                and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
             wall_before += result.diagnostics["wall_time"]
             elements = min(2 * tried[-1], cfg.solver.refine_up_to)
-            cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", elements)]),
+            cfg = config.validate_scene(config.apply_overrides(cfg.plain(), [("rod.elements", elements)]),
                                    SCENES)
             resumed = None
             if refine_from == "trip" and elements == 2 * tried[-1] and not extra:
@@ -350,8 +350,8 @@ def run_scene(scene, *, topology: bool | None = None,
                    f"{result.diagnostics['elements']} elements while an end turned at "
                    f"{rates[-1]:g} turns/s")
         rates.append(rates[-1] / 2)
-        slower = C.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
-        origin, result, more, before = refined(C.validate_scene(slower, SCENES))
+        slower = config.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
+        origin, result, more, before = refined(config.validate_scene(slower, SCENES))
         wall_before += before
         tried += more
         result.diagnostics["notes"].append(
@@ -460,7 +460,7 @@ def compile_kernel() -> float:
         except OSError:  # no second process here: the topology compiles below, in this one
             helper = None
     try:
-        cfg = C.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
+        cfg = config.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
                                 "loading": {"force_multiple": 25, "force_ramp_time": 1e-3,
                                             "twist_density": 0.1, "twist_rate": 100.0},
                                 "solver": {"hold_max_time": 1e-3, "stability_probe": True}},
@@ -552,7 +552,7 @@ def check_memory(cfg, *, twist_targets: list[float] | None = None, share: int = 
     interval = cfg.output.history_interval
     least = interval * peak / room
     shared = f" per worker ({share} at once)" if share > 1 else ""
-    raise C.ConfigError(
+    raise config.ConfigError(
         f"{where}output.history_interval", interval,
         f"at least {least:.3g} s: {interval:g} s asks for up to {rows:.3g} snapshots × {nodes} "
         f"nodes × 48 bytes = {snapshot_bytes / 2**20:.0f} MiB over {seconds:.4g} s of "

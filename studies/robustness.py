@@ -1428,6 +1428,13 @@ def main(argv=None) -> int:
         from rodphase.studytools import write_block
 
         write_block(args.write, "robustness", text)
+        if args.cases is None:  # the whole corpus: its row of the current figures
+            from rodphase.studytools import record_current
+
+            tries, right = sum(r.tried for r in rows), sum(r.right for r in rows)
+            record_current("robustness", f"{len(rows)} rows, {tries} tries, {right} right; "
+                           f"{total:.0f} s ({args.kills} kill points, seed {args.seed})",
+                           source="`make robustness`")
     if args.workdir is None:
         shutil.rmtree(workdir, ignore_errors=True)
     return 0 if all(r.passed or r.case.startswith("kill-9: no worker") for r in rows) else 1
