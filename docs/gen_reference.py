@@ -1,9 +1,17 @@
-"""Reference pages generated from the code at every docs build (mkdocs-gen-files runs this):
-the commands from click, the config keys from rodphase.config's schema. Nothing here is
-written by hand, so the pages cannot drift from the code. `python docs/gen_reference.py`
-prints them (tests/test_docs.py renders them the same way)."""
+"""Reference pages generated from the code: the commands from click, the config keys from
+rodphase.config's schema, the guards from the kernel's table. Nothing in them is written by
+hand, and they are committed so that they read on GitHub too.
+
+    python docs/gen_reference.py           # write docs/reference/{cli,config,guards}.md
+    python docs/gen_reference.py --check   # exit 1 if one of them is stale
+
+The docs build (mkdocs-gen-files runs this file) and tests/test_docs.py fail when a page is
+stale against the code: run the first command and commit the pages."""
 
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import click
 
@@ -49,7 +57,7 @@ def config_page() -> str:
 
     out = ["# Config keys", "",
            "Generated from `rodphase.config` (`SCENE_SCHEMA`, `SWEEP_SCHEMA`, `AXES`, `MEANINGS`) "
-           "at every docs build. Units are SI unless the allowed values say otherwise; *auto* "
+           "by `docs/gen_reference.py`. Units are SI unless the allowed values say otherwise; *auto* "
            "means the engine derives the value. Any key can be changed without editing a file: "
            "`--set section.key=value` on the command line, `{\"section.key\": value}` from "
            "Python. `rodphase config NAME` prints a scene or sweep with every default filled in.",
@@ -77,15 +85,17 @@ def config_page() -> str:
 def cli_page() -> str:
     from rodphase.cli import main
 
-    root = click.Context(main, info_name="rodphase")
+    # a fixed width, so that the page does not depend on the terminal that renders it
+    root = click.Context(main, info_name="rodphase", terminal_width=88, max_content_width=88)
     out = ["# Commands", "",
-           "Generated from the click commands of `rodphase.cli` at every docs build: each "
-           "section is that command's `--help`. Exit statuses: "
+           "Generated from the click commands of `rodphase.cli` by `docs/gen_reference.py`: "
+           "each section is that command's `--help`. Exit statuses: "
            "[statuses and exit codes](statuses.md).", "",
            "```text", main.get_help(root), "```", ""]
     for name in sorted(main.list_commands(root)):
         command = main.get_command(root, name)
-        context = click.Context(command, info_name=name, parent=root)
+        context = click.Context(command, info_name=name, parent=root, terminal_width=88,
+                                max_content_width=88)
         out += [f"## rodphase {name}", "", "```text", command.get_help(context), "```", ""]
     return "\n".join(out)
 
@@ -94,7 +104,7 @@ def guards_page() -> str:
     from rodphase.rod.kernel import GUARDS
 
     out = ["# Guards", "",
-           "Generated from `rodphase.rod.kernel.GUARDS` at every docs build. A guard that trips "
+           "Generated from `rodphase.rod.kernel.GUARDS` by `docs/gen_reference.py`. A guard that trips "
            "stops the run with status `unstable`; the run's `diagnostics[\"guard\"]` holds the "
            "short name, `diagnostics[\"where\"]` the index named below, and its message says "
            "what to change. How each guard is acted on: [statuses](statuses.md).", "",
@@ -113,29 +123,47 @@ def guards_page() -> str:
 PAGES = {"reference/cli.md": cli_page, "reference/config.md": config_page,
          "reference/guards.md": guards_page}
 
-try:
-    import mkdocs_gen_files
-except ImportError:  # run by hand or by a test
-    mkdocs_gen_files = None
+DOCS = Path(__file__).resolve().parent
 
-# pages that the nav names and that another change is writing: a stand-in until they land
-# (the real file wins as soon as it exists)
+# pages that the nav names and that another change is writing: a stand-in in the built site
+# until they land (the real file wins as soon as it exists)
 PENDING = {"explanation/twist-into-writhe.md": (
     "# Twist into writhe, against PyElastica\n\nThe comparison of Fig 2a, 2b and 4a with the "
     "authors' own code (PyElastica 1.0) is being written. Until then: "
     "[validation](validation.md) and the [dated cross-check](../history/reproduction.md"
     "#cross-check-against-the-authors-own-code-pyelastica-10).\n")}
 
-if mkdocs_gen_files is not None and __name__ != "__main__":
-    from pathlib import Path
 
+def stale() -> list[str]:
+    """The generated pages whose committed text is not what the code renders now."""
+    return [path for path, render in PAGES.items()
+            if not (DOCS / path).exists() or (DOCS / path).read_text() != render()]
+
+
+def write() -> None:
     for path, render in PAGES.items():
-        with mkdocs_gen_files.open(path, "w") as page:
-            page.write(render())
-    for path, text in PENDING.items():
-        if not (Path(__file__).parent / path).exists():
-            with mkdocs_gen_files.open(path, "w") as page:
-                page.write(text)
-elif __name__ == "__main__":
-    for render in PAGES.values():
-        print(render())
+        (DOCS / path).write_text(render())
+        print(f"wrote docs/{path}")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] == ["--check"]:
+        old = stale()
+        if old:
+            sys.exit(f"stale against the code: {', '.join(old)}; run python docs/gen_reference.py")
+    else:
+        write()
+else:
+    try:
+        import mkdocs_gen_files
+    except ImportError:  # imported by a test
+        mkdocs_gen_files = None
+    if mkdocs_gen_files is not None:
+        old = stale()
+        if old:
+            raise SystemExit(f"stale against the code: {', '.join(old)}; run python "
+                             "docs/gen_reference.py and commit the pages")
+        for path, text in PENDING.items():
+            if not (DOCS / path).exists():
+                with mkdocs_gen_files.open(path, "w") as page:
+                    page.write(text)
