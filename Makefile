@@ -121,7 +121,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 	$(BIN)/python benchmarks/reference_positions.py --compare $(OUT)/positions_base.npz $(OUT)/positions_here.npz
 
 ##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
-.PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
+.PHONY: phase fig3 figures docs-figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
 	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
 	static-path hold-budget energy-audit
@@ -139,8 +139,15 @@ fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, wit
 	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
 	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
 
-figures: $(STAMP) fig3  ## every figure of the paper (see docs/history/reproduction.md)
+figures: $(STAMP) fig3  ## every figure of the paper (docs/explanation/validation.md)
 	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
+
+# the figures docs/ shows: Fig 3's map (with its rows of docs/current.md) and the scene figures
+DOC_FIGURES = fig2a fig2b fig4a fig4b fig4c figS9 figS3
+docs-figures: current-fig3  ## redraw every figure of docs/img that validation shows (Fig 3 and the scene figures)
+	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
+	for f in $(DOC_FIGURES); do cp $(OUT)/$$f.png docs/img/repro_$$f.png; \
+		test ! -f $(OUT)/$${f}_shape.png || cp $(OUT)/$${f}_shape.png docs/img/repro_$${f}_shape.png; done
 
 onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/history/reproduction.md)
 	$(BIN)/python studies/onset_study.py --write
