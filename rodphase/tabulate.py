@@ -65,7 +65,7 @@ def classify_table(store, run_ids=None, **thresholds) -> pd.DataFrame:
 # dimensionless, a count or an index; "": text)
 COLUMNS = {
     "run_id": ("", "the run's name, key into /runs"),
-    "status": ("", "ok, unstable, not_converged or error (see the README)"),
+    "status": ("", "ok, unstable, not_converged or error (docs/reference/statuses.md)"),
     "message": ("", "what ended the run, and what to change if it failed"),
     "wall_time": ("s", "wall-clock time of the run"),
     "steps": ("1", "time steps taken"),
