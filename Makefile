@@ -149,10 +149,10 @@ docs-figures: current-fig3  ## redraw every figure of docs/img that validation s
 	for f in $(DOC_FIGURES); do cp $(OUT)/$$f.png docs/img/repro_$$f.png; \
 		test ! -f $(OUT)/$${f}_shape.png || cp $(OUT)/$${f}_shape.png docs/img/repro_$${f}_shape.png; done
 
-onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/history/reproduction.md)
+onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/history/onset.md)
 	$(BIN)/python studies/onset_study.py --write
 
-hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/history/reproduction.md)
+hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/history/scene-figures.md)
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase run hat_curve -o $(OUT)/hat.h5
 	$(BIN)/rodphase plot $(OUT)/hat.h5 --kind hat -o $(OUT)/hat.png
@@ -173,8 +173,8 @@ ramp-rate: $(STAMP)  ## Fig 3's twist ramp at several rates against a fine refer
 	$(BIN)/python studies/ramp_rate.py --rates 0.25,0.5,1,2 --jobs $(JOBS) --out $(OUT)/ramp --write docs/history/performance.md
 
 # issue #29 item 4: Fig 3 under one change at a time, point by point against the map as it ships
-VARIANTS_RUN = $(BIN)/python studies/map_variants.py --jobs $(JOBS) --out $(OUT)/variants --write docs/history/reproduction.md
-study-shear: $(STAMP)  ## Fig 3 with shear stiffness x 10 and G = E/3 against the default (reproduction.md)
+VARIANTS_RUN = $(BIN)/python studies/map_variants.py --jobs $(JOBS) --out $(OUT)/variants --write docs/history/fig3-corner.md
+study-shear: $(STAMP)  ## Fig 3 with shear stiffness x 10 and G = E/3 against the default (docs/history/fig3-corner.md)
 	$(VARIANTS_RUN) shear_x10 g_e3 --figure docs/img/map_shear.png
 study-damping: $(STAMP)  ## Fig 3 at half and twice the damping and without the quadratic drag
 	$(VARIANTS_RUN) damping_half damping_twice no_drag --figure docs/img/map_damping.png
@@ -190,7 +190,7 @@ FIG3_FAILURES = --point 2.4115579335018995 1.093481214158237 --point 2.490534851
 	--point 2.5258821224793793 1.079950714390725 --point 2.557734097540379 1.0524589744396509 \
 	--point 2.5985506212338807 1.1349544170312584
 energy-audit: $(STAMP)  ## Fig 3's five failures: the power the paper's law adds in their last second (reproduction.md)
-	$(BIN)/python studies/energy_audit.py $(FIG3_FAILURES) --write docs/history/reproduction.md
+	$(BIN)/python studies/energy_audit.py $(FIG3_FAILURES) --write docs/history/fig3-corner.md
 
 # the random sweep is fig3's; the reference (24 x 24 by continuation) and the adaptive one are its own
 boundary-error: fig3  ## phase-boundary error of random and adaptive sampling against a 24 x 24 reference

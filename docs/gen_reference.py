@@ -130,7 +130,7 @@ DOCS = Path(__file__).resolve().parent
 PENDING = {"explanation/twist-into-writhe.md": (
     "# Twist into writhe, against PyElastica\n\nThe comparison of Fig 2a, 2b and 4a with the "
     "authors' own code (PyElastica 1.0) is being written. Until then: "
-    "[validation](validation.md) and the [dated cross-check](../history/reproduction.md"
+    "[validation](validation.md) and the [dated cross-check](../history/crosscheck.md"
     "#cross-check-against-the-authors-own-code-pyelastica-10).\n")}
 
 
@@ -153,17 +153,14 @@ if __name__ == "__main__":
             sys.exit(f"stale against the code: {', '.join(old)}; run python docs/gen_reference.py")
     else:
         write()
-else:
-    try:
-        import mkdocs_gen_files
-    except ImportError:  # imported by a test
-        mkdocs_gen_files = None
-    if mkdocs_gen_files is not None:
-        old = stale()
-        if old:
-            raise SystemExit(f"stale against the code: {', '.join(old)}; run python "
-                             "docs/gen_reference.py and commit the pages")
-        for path, text in PENDING.items():
-            if not (DOCS / path).exists():
-                with mkdocs_gen_files.open(path, "w") as page:
-                    page.write(text)
+elif __name__ == "<run_path>":  # run by mkdocs-gen-files inside a docs build (not by a test)
+    import mkdocs_gen_files
+
+    old = stale()
+    if old:
+        raise SystemExit(f"stale against the code: {', '.join(old)}; run python "
+                         "docs/gen_reference.py and commit the pages")
+    for path, text in PENDING.items():
+        if not (DOCS / path).exists():
+            with mkdocs_gen_files.open(path, "w") as page:
+                page.write(text)

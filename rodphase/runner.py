@@ -187,7 +187,7 @@ REFINE_BACK = 1.0  # s
 # At Fig 3's triple point (Phi*a 1.92, L/L0 1.13, n = 160) the largest stretch there grew
 # from 1.28 to 1.64 in 5 s of a 0.5 turns/s ramp, and stayed at 1.27 at 0.25 turns/s, where
 # the run ends a plectoneme; neither 320 elements nor a step 0.4 times as long mends all such
-# runs (docs/history/reproduction.md, "The triple point's failures").
+# runs (docs/history/fig3-corner.md, "The triple point's failures").
 SLOWABLE_GUARDS = ("clamp_lag", "resolution", "shear")
 
 

@@ -241,7 +241,7 @@ GUARDS = {
                    "its tangent)", "element",
                    # Fig 3's runaways at Φa >= 2.41 trip at any resolution, step or twist
                    # rate, an element of a strand stretched to 1.8-2.1 while the law's
-                   # 1/e³ bend couple feeds the motion (docs/history/reproduction.md, "Where the
+                   # 1/e³ bend couple feeds the motion (docs/history/fig3-corner.md, "Where the
                    # corner's failures get their energy"): the step advice alone sent users
                    # the wrong way
                    "If it trips here at any step and resolution (a runaway of the Cosserat "
@@ -1056,7 +1056,7 @@ def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equili
     at every check; the shape has settled when two consecutive window means agree and within
     the window no point strayed from its mean (rms) by more than the same distance.
     Averaging is what lets a hold end under contact: there a standing vibration (~390 Hz,
-    amplitude ~0.2 % of the radius, see docs/history/reproduction.md) keeps the residual above any
+    amplitude ~0.2 % of the radius, see docs/history/holds-and-laws.md) keeps the residual above any
     useful tolerance although the shape no longer changes. The spread test keeps a slow,
     large oscillation whose period matches the window from passing as settled.
     Returns (window_count, window_start, have_mean, settle_motion, settled)."""
