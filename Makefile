@@ -54,7 +54,7 @@ docs-serve: $(DOCS_STAMP)  ## serve the docs at http://127.0.0.1:8000, rebuilt o
 clean:  ## remove outputs (keeps .venv)
 	rm -rf $(OUT) .pytest_cache
 
-##@ Benchmarks (benchmarks/; the timings depend on the machine and its load, see docs/history/benchmarks.md)
+##@ Benchmarks (benchmarks/; the timings depend on the machine and its load: docs/explanation/performance.md)
 # `make bench` is the four that docs/history/benchmarks.md reports; each script also has its own target.
 .PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
 	current-fig3 bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
@@ -163,7 +163,7 @@ hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/
 stability-map: $(STAMP)  ## largest stable dt against the bound (docs/history/performance.md and its figure)
 	$(BIN)/python studies/stability_map.py --json $(OUT)/perf/stability_map.json --write docs/history/performance.md
 
-damping-sweeps: $(STAMP)  ## holds that settle: the damping variants on the figures, the demo, Fig 3 (reproduction.md)
+damping-sweeps: $(STAMP)  ## holds that settle: the damping variants on the figures, the demo, Fig 3 (docs/history/holds-and-laws.md)
 	$(BIN)/python studies/damping_sweeps.py speed
 	$(BIN)/python studies/damping_sweeps.py demo --out $(OUT)/damping
 	$(BIN)/python studies/damping_sweeps.py figures --out $(OUT)/damping
