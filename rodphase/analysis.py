@@ -2,7 +2,7 @@
 
 Pure functions: arrays in ((N, 3) points, one per row, SI units), numbers or arrays out; no
 I/O, no plotting, no simulation. `rodphase.classify` builds its alignment on `partners`, and
-studies/figures.py builds the numbers of docs/reproduction.md on the rest.
+studies/figures.py builds the numbers of docs/explanation/validation.md on the rest.
 
 The reference for the definitions is Charles, Gazzola & Mahadevan, "Topology, geometry and
 mechanics of strongly stretched and twisted filaments" (PRL 2019): "the paper" below.

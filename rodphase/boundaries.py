@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from . import config as C
+from . import config
 
 KINDS = ("onset", "plectoneme_solenoid", "triple_point", "restraighten")
 
@@ -78,7 +78,7 @@ class Settings:
 def check_traceable(sweep) -> None:
     """Refuse, before anything runs, a sweep whose axes the method cannot trace."""
     if set(sweep.axes) != {"twist_density", "extension"}:
-        raise C.ConfigError("sweep.axes", dict(sweep.axes),
+        raise config.ConfigError("sweep.axes", dict(sweep.axes),
                             "twist_density and extension (the axes boundaries are traced in)")
 
 
@@ -94,7 +94,7 @@ def onset_line(scene, sweep, settings: Settings) -> pd.DataFrame:
     extensions = np.linspace(lo, hi, settings.onset_points)
     lines = onset_lines(scene.plain(), extensions)
     if lines is None:
-        raise C.ConfigError("sweep.scene", scene.scene,
+        raise config.ConfigError("sweep.scene", scene.scene,
                             "a scene whose rod is clamped, loaded at its end and turned there, "
                             "under the paper's law (the onset is that rod's)")
     phi = lines["model_rest"].to_numpy()
@@ -125,7 +125,7 @@ def check_box(onset: pd.DataFrame, sweep) -> None:
     top = sweep.axes["twist_density"][1]
     lowest = float(onset["twist_density"].min())
     if not top > lowest:
-        raise C.ConfigError("sweep.axes.twist_density", list(sweep.axes["twist_density"]),
+        raise config.ConfigError("sweep.axes.twist_density", list(sweep.axes["twist_density"]),
                             f"a range that reaches the straight rod's onset (Phi*a {lowest:.3g} "
                             "at the box's lowest extension): below it every run stays straight "
                             "and there is no boundary to trace")
@@ -383,7 +383,7 @@ def sweep_for_boundaries(sweep_file, overrides=(), settings: dict | None = None)
 
     extra = [("sweep.sampler", "boundaries"), ("sweep.samples", 4)]
     extra += [(f"sweep.boundary.{k}", v) for k, v in (settings or {}).items() if v is not None]
-    sweep, scene = C.load_sweep(str(sweep_file), list(overrides) + extra, SCENES)
+    sweep, scene = config.load_sweep(str(sweep_file), list(overrides) + extra, SCENES)
     check_traceable(sweep)
     return sweep, scene
 
@@ -416,8 +416,8 @@ def trace(sweep, scene, output: str | None, *, only_onset: bool = False, jobs: i
     from .store import open_store
     from .tabulate import classify_table
 
-    with open_store(output, config_text=C.to_yaml(sweep=sweep, scene=scene),
-                    config_hash=C.config_hash(sweep, scene), version=__version__,
+    with open_store(output, config_text=config.to_yaml(sweep=sweep, scene=scene),
+                    config_hash=config.config_hash(sweep, scene), version=__version__,
                     kind="sweep") as store:
         runs = store.table(classify_table(store))  # params, status and labels
         table = lines(onset, levels_from_store(runs, onset, sweep, settings), settings)

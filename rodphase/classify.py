@@ -28,7 +28,7 @@ def alignment(points, radius, rest_length=None, epsilon=0.2, min_separation=None
     (2 + epsilon) * radius and |k - i| > min_separation, by default separation·n·radius /
     rest_length: `separation` rest radii of arc, the paper's 5 (rest_length defaults to the
     polyline length of `points`). A coil whose turns are shorter than that many radii of
-    arc (the tightest solenoids above L/L0 ≈ 1.165, docs/reproduction.md) has no partners
+    arc (the tightest solenoids above L/L0 ≈ 1.165, docs/history/reproduction.md) has no partners
     and reads as straight: a smaller `separation` sees it. Each element takes its
     nearest such neighbour (`rodphase.analysis.partners`). Returns NaN when no element has
     one (a straight or open shape).
@@ -78,7 +78,7 @@ def unseen_coil(phase_name: str, writhe: float) -> bool:
     """A final shape labelled straight that writhes by more than UNSEEN_COIL_WRITHE turns: the
     paper's classifier looks for partners at least 5 radii away along the rod, and a solenoid
     whose turns are shorter than that (the tightest coils, above L/L0 ≈ 1.165 at Fig 3's
-    loads, docs/reproduction.md) has none, so it reads as straight. A straight rod writhes by
+    loads, docs/history/reproduction.md) has none, so it reads as straight. A straight rod writhes by
     ~0 (its frozen imperfection: < 1e-3 turns); half a turn is a loop."""
     return phase_name == "straight" and math.isfinite(writhe) and abs(writhe) > UNSEEN_COIL_WRITHE
 

@@ -12,8 +12,22 @@ from pathlib import Path
 
 import click
 
-from . import config as C
 from ._version import __version__
+from .config import (
+    PACKAGE_CONFIGS,
+    ConfigError,
+    ResolutionWarning,
+    config_hash,
+    earlier_hashes,
+    load_scene,
+    load_sweep,
+    make_output_folder,
+    parse_override,
+    read_yaml,
+    resolve_sweep_path,
+    stored_config,
+    to_yaml,
+)
 
 FORCE_HELP = ("Replace OUTPUT if it holds another config's results (it is replaced when the "
               "first new run is stored, not before). With the same config it changes nothing: "
@@ -36,7 +50,7 @@ def reports_errors(func):
             click.echo(f"error: {exc}. Every run stored before is intact: free some space and "
                        "run the same command to go on.", err=True)
             sys.exit(2)
-        except (C.ConfigError, StoreError, FileNotFoundError, KeyError) as exc:
+        except (ConfigError, StoreError, FileNotFoundError, KeyError) as exc:
             # str(KeyError) quotes its message: print the message itself
             text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
             click.echo(f"error: {text}", err=True)
@@ -46,14 +60,14 @@ def reports_errors(func):
 
 
 def _overrides(items) -> list:
-    return [C.parse_override(item) for item in items]
+    return [parse_override(item) for item in items]
 
 
 def _has_runs(store, store_file) -> list[str]:
     """The store's run ids; a store without any is refused in one line."""
     ids = store.run_ids()
     if not ids:
-        raise C.ConfigError(str(store_file), "no finished runs yet",
+        raise ConfigError(str(store_file), "no finished runs yet",
                             "a store with at least one run (a sweep killed before its first "
                             "run has none; run the same sweep command again)")
     return ids
@@ -64,7 +78,7 @@ def _check_run(store, store_file, run_id: str) -> str:
     ids = _has_runs(store, store_file)
     if run_id not in ids:
         shown = ", ".join(ids) if len(ids) <= 6 else f"{', '.join(ids[:3])}, ..., {ids[-1]}"
-        raise C.ConfigError("--run", run_id, f"a run id of {store_file} ({len(ids)} stored: "
+        raise ConfigError("--run", run_id, f"a run id of {store_file} ({len(ids)} stored: "
                             f"{shown})")
     return run_id
 
@@ -102,7 +116,7 @@ def _warn_once_per_key() -> None:
     said: set[str] = set()
 
     def show(message, category, filename, lineno, file=None, line=None):
-        if not issubclass(category, C.ResolutionWarning):
+        if not issubclass(category, ResolutionWarning):
             return shown(message, category, filename, lineno, file, line)
         key = str(message).split(" ", 1)[0]
         if key not in said:
@@ -111,7 +125,7 @@ def _warn_once_per_key() -> None:
 
     shown = warnings.showwarning
     warnings.showwarning = show
-    warnings.simplefilter("always", C.ResolutionWarning)
+    warnings.simplefilter("always", ResolutionWarning)
 
 
 @click.group(cls=_OneLineUsageErrors, context_settings={"help_option_names": ["-h", "--help"]})
@@ -151,18 +165,18 @@ def run(scene, output, sets, force):
     from .restart import checked_initial_state
     from .scenes import SCENES
 
-    cfg = checked_initial_state(C.load_scene(scene, _overrides(sets), SCENES))
+    cfg = checked_initial_state(load_scene(scene, _overrides(sets), SCENES))
     from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
     from .tabulate import classify_store
 
     check_memory(cfg)  # a run whose snapshots cannot fit is refused before it costs anything
-    C.make_output_folder(output)
+    make_output_folder(output)
     # the output is opened (locked, its config checked) before simulating: a run that cannot
     # be written is refused before it costs anything
-    with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
+    with open_store(output, config_text=to_yaml(scene=cfg), config_hash=config_hash(cfg),
                     version=__version__, kind="run", replace=force,
-                    earlier=C.earlier_hashes(cfg)) as store:
+                    earlier=earlier_hashes(cfg)) as store:
         from .runner import compile_kernel, cpu_seconds
 
         click.echo("Compiling the kernel (once; numba caches it on disk) ...")
@@ -252,10 +266,10 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     from .scenes import SCENES
     from .sweep import ClusterLost, plan, run_sweep
 
-    sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
+    sweep_cfg, scene_cfg = load_sweep(sweep_file, _overrides(sets), SCENES)
     if sweep_cfg.sampler == "boundaries":
-        raise C.ConfigError("sweep.sampler", "boundaries", "a sampler of points; the boundaries "
-                            "sampler places its runs by bracketing: rodphase boundaries")
+        raise ConfigError("sweep.sampler", "boundaries", "a sampler of points; the boundaries "
+                          "sampler places its runs by bracketing: rodphase boundaries")
     checked_initial_state(scene_cfg)
     check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
     try:
@@ -362,7 +376,7 @@ def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, l
         click.echo(f"{r.done} runs ok, {r.failed} failed, {r.skipped} reused of {r.total} in "
                    f"{r.wall:.1f} s; runs and boundaries in {output}")
     if csv_path:
-        C.make_output_folder(csv_path)
+        make_output_folder(csv_path)
         found.table.to_csv(csv_path, index=False, float_format="%.10g")
         click.echo(f"boundaries: {csv_path}")
 
@@ -411,7 +425,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above, se
     counts = table["phase"].value_counts().to_dict()
     click.echo(f"{len(table)} runs: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     if csv_path:
-        C.make_output_folder(csv_path)
+        make_output_folder(csv_path)
         write_table_csv(table, csv_path)
         click.echo(f"table written to {csv_path} (units and meanings of its columns in "
                    f"{csv_path}-metadata.json)")
@@ -461,22 +475,22 @@ def plot(store_file, kind, output, run_id, experiments, twist, background, size,
       rodphase plot out/quick.h5 --kind phase --size column -o phase.pdf
       rodphase plot out/quick.h5 --kind topology --run run-00003 -o lk.png
     """
-    C.make_output_folder(output)
+    make_output_folder(output)
     if size is not None and size not in ("column", "page"):
         try:
             width, height = (float(v) for v in size.split(","))
             size = (width, height)
         except ValueError:
-            raise C.ConfigError("--size", size, "column, page, or width,height in inches "
+            raise ConfigError("--size", size, "column, page, or width,height in inches "
                                 "(e.g. 3.4,3)") from None
     try:
         _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption,
               theory)
-    except C.ConfigError:
+    except ConfigError:
         raise  # already names what was given and what is allowed
     except ValueError as exc:
         # a figure that this file's data cannot make (say why, no traceback)
-        raise C.ConfigError(f"--kind {kind}", store_file, str(exc)) from None
+        raise ConfigError(f"--kind {kind}", store_file, str(exc)) from None
     click.echo(f"written {output}")
 
 
@@ -515,7 +529,7 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
           theory=True):
     import pandas as pd
 
-    from . import plot as P
+    from . import plot as plots
     from .store import read_store
 
     with read_store(store_file) as store:
@@ -527,8 +541,8 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
-            config = C.stored_config(store.attrs.get("config_yaml", ""))
-            text = P.sweep_caption(config, table) if caption else None
+            config = stored_config(store.attrs.get("config_yaml", ""))
+            text = plots.sweep_caption(config, table) if caption else None
             lines = None
             if theory and "extension" in table and table["extension"].notna().any():
                 from .tabulate import onset_lines
@@ -538,8 +552,8 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                 lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12
                                              for i in range(13)])
             traced = store.boundaries() if theory else None
-            P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
-                        onset=lines, lines=traced)
+            plots.phase_map(table, output, experiments=exp, twist=column, caption=text,
+                            size=size, onset=lines, lines=traced)
         elif kind == "path":
             from .tabulate import path_table
 
@@ -553,32 +567,32 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             if background:
                 with read_store(background) as other:
                     behind = _classified_table(other, _has_runs(other, background))
-            P.phase_path(paths, output, background=behind)
+            plots.phase_path(paths, output, background=behind)
         elif kind == "shape":
             table = store.table()
-            ids = [run_id] if run_id else P.shape_panels(table)
+            ids = [run_id] if run_id else plots.shape_panels(table)
             shapes = []
             for rid in ids:
                 result = store.read_run(rid)
-                shapes.append((P.run_label(table.set_index("run_id").loc[rid]),
+                shapes.append((plots.run_label(table.set_index("run_id").loc[rid]),
                                result.positions, result.rest_radius))
-            P.shape_grid(shapes, output)
+            plots.shape_grid(shapes, output)
         else:
             rid = run_id or _run_with_history(store, ids)
             result = store.read_run(rid)
             if kind in ("topology", "force") and len(result.history["time"]) < 2:
-                raise C.ConfigError("--run", rid, "a run with a history of two rows or more "
+                raise ConfigError("--run", rid, "a run with a history of two rows or more "
                                     f"to draw its {kind} curves: this one has one row (a run "
                                     "started on its straight equilibrium that settled at once)")
-            params = P.params_text(store.run_params(rid))
+            params = plots.params_text(store.run_params(rid))
             if kind == "topology":
-                P.topology_curves(result, output, title=f"{rid}: {params}" if params else rid)
+                plots.topology_curves(result, output, title=f"{rid}: {params}" if params else rid)
             elif kind == "hat":
-                P.hat_curve(result, output)
+                plots.hat_curve(result, output)
             elif kind == "response":
-                P.control_response(result, output)
+                plots.control_response(result, output)
             else:
-                P.force_displacement(result.history, output)
+                plots.force_displacement(result.history, output)
 
 
 @main.command()
@@ -600,26 +614,26 @@ def movie(store_file, run_id, output, fps, height):
     """
     import shutil
 
-    from . import plot as P
+    from . import plot as plots
     from .store import read_store
 
     if Path(output).suffix.lower() != ".gif" and shutil.which("ffmpeg") is None:
         # writing a GIF under another name (or beside it) would surprise: say it instead
-        raise C.ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
+        raise ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
                             "installed (apt install ffmpeg, conda install ffmpeg)")
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
     if len(result.snapshot_positions) < 2:
-        raise C.ConfigError("--run", run_id, "a run with two snapshots or more to animate: "
+        raise ConfigError("--run", run_id, "a run with two snapshots or more to animate: "
                             f"this one kept {len(result.snapshot_positions)} (a sweep keeps the "
                             "final state only; run it with --set output.snapshots=all)")
-    C.make_output_folder(output)
+    make_output_folder(output)
     from .analysis import twist_density
 
     h = result.history
     rows = result.snapshot_history_rows
     phi_a = twist_density(result)[rows] if "end_rotation" in h else None
-    path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps,
+    path = plots.movie(result.snapshot_positions, result.rest_radius, output, fps=fps,
                    times=h["time"][rows], twist_density=phi_a, height=height)
     click.echo(f"written {path}")
 
@@ -643,7 +657,7 @@ def export(store_file, run_id, output, snapshots):
     from .export import write_vtk, write_vtk_series
     from .store import read_store
 
-    C.make_output_folder(output)
+    make_output_folder(output)
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
     if snapshots:
@@ -670,16 +684,16 @@ def config(name, sets):
     from .scenes import SCENES
 
     try:
-        path = C.resolve_sweep_path(name)
-        is_sweep = "sweep" in C.read_yaml(path)
-    except C.ConfigError:
+        path = resolve_sweep_path(name)
+        is_sweep = "sweep" in read_yaml(path)
+    except ConfigError:
         is_sweep = False
     if is_sweep:
-        sweep_cfg, scene_cfg = C.load_sweep(path, _overrides(sets), SCENES)
-        click.echo(C.to_yaml(sweep=sweep_cfg, scene=checked_initial_state(scene_cfg)), nl=False)
+        sweep_cfg, scene_cfg = load_sweep(path, _overrides(sets), SCENES)
+        click.echo(to_yaml(sweep=sweep_cfg, scene=checked_initial_state(scene_cfg)), nl=False)
     else:
-        scene_cfg = checked_initial_state(C.load_scene(name, _overrides(sets), SCENES))
-        click.echo(C.to_yaml(scene=scene_cfg), nl=False)
+        scene_cfg = checked_initial_state(load_scene(name, _overrides(sets), SCENES))
+        click.echo(to_yaml(scene=scene_cfg), nl=False)
 
 
 @main.command()
@@ -696,7 +710,7 @@ def scenes():
 
     import yaml
 
-    root = C.PACKAGE_CONFIGS
+    root = PACKAGE_CONFIGS
     width = max(shutil.get_terminal_size((100, 24)).columns, 60)
     for path in sorted((root / "scenes").glob("*.yaml")) + sorted(root.glob("*.yaml")):
         data = yaml.safe_load(path.read_text()) or {}

@@ -990,3 +990,138 @@ def earlier_hashes(*parts: Frozen) -> dict[str, int]:
 
 def to_yaml(**parts: Frozen) -> str:
     return yaml.safe_dump({k: v.plain() for k, v in parts.items()}, sort_keys=False)
+
+
+# ---------------------------------------------------------------- what each key means
+# One line per key of SCENE_SCHEMA and SWEEP_SCHEMA, for `rodphase config --help`-like
+# listings and the generated reference (docs/gen_reference.py renders it with each key's
+# default and allowed values, read from the schema). tests/test_docs.py checks that every
+# key has one.
+MEANINGS: dict[str, str] = {
+    "rod.length": "rest length L0",
+    "rod.radius": "rest radius a0 (thins as a0/√e with the stretch e of an incompressible rod)",
+    "rod.elements": "elements n of the discrete rod (n+1 nodes), or auto: from the rod's "
+                    "slenderness over rod.element_length and its twist (90° an element at "
+                    "most); a given count below L0/a0 (with contact) or 120° of twist an "
+                    "element draws a warning",
+    "rod.element_length": "the element length rod.elements: auto aims at, in rest radii "
+                          "(contact needs elements no longer than about the radius)",
+    "rod.elements_from": "how the count in force was chosen (auto or given); set by "
+                         "validation and by --set rod.elements",
+    "rod.density": "mass density",
+    "rod.imperfection": "random rest curvature that breaks the straight rod's symmetry",
+    "rod.seed": "seed of the imperfection",
+    "material.youngs_modulus": "Young's modulus E",
+    "material.shear_modulus": "shear modulus G; auto = the paper's 2E/3",
+    "material.incompressible": "the section shrinks as the rod stretches (A·e constant)",
+    "material.law": "paper: Gazzola 2018's law (the paper's figures); neo_hookean: forces and "
+                    "couples from one strain energy (conserves energy)",
+    "material.bend_stiffness": "B = EI given directly (null: from E and the radius)",
+    "material.twist_stiffness": "C = GJ given directly (null: from G and the radius)",
+    "material.shear_stiffness": "4GA/3 given directly (null: from G and the radius)",
+    "material.axial_stiffness": "EA given directly (null: from E and the radius)",
+    "ends.start": "the start (node 0): clamped or free",
+    "ends.end_axial": "the end along the axis: a constant force, a prescribed displacement, "
+                      "or free",
+    "ends.end_lateral": "the end held on the axis or free to move sideways",
+    "ends.end_rotation": "the end's frame held (turned by the twist protocol) or free",
+    "ends.start_body": "a rigid cylinder beyond a clamped start that takes part in contact; "
+                       "none lets a loop slip over the end (Fig S3)",
+    "ends.end_body": "the same beyond a laterally held end",
+    "ends.body_radius": "radius of the end bodies",
+    "loading.force_multiple": "end load as a multiple of the Euler load F_C",
+    "loading.force": "end load in newtons (instead of force_multiple or extension)",
+    "loading.extension": "end load given as the extension L/L0 of the incompressible rod "
+                         "under it: F = E·A0·(1 − 1/e)",
+    "loading.force_ramp_time": "time over which the load ramps up",
+    "loading.twist_turns": "end rotation in turns (instead of a twist density)",
+    "loading.twist_density": "end rotation as the paper's Φa = θ·a0/L0",
+    "loading.twist_density_current": "end rotation as Φa of the stretched straight rod "
+                                     "(rest value / e^1.5)",
+    "loading.twist_rate": "speed of the twist ramp",
+    "loading.quasi_static_below": "start on the straight loaded rod at this fraction of its "
+                                  "buckling twist instead of ramping from rest; 0 = the "
+                                  "paper's whole protocol",
+    "physics.self_contact": "self-contact (penalty spring–dashpot between capsules)",
+    "physics.friction": "Coulomb friction coefficient of self-contact",
+    "physics.gravity": "gravity vector",
+    "contact.stiffness": "pair spring per unit element length, in units of E",
+    "contact.damping_ratio": "damping ratio ζ of the pair dashpot",
+    "contact.dashpot": "explicit: the dashpot is part of the force; implicit: backward Euler "
+                       "per pair after the kick (no time-step limit)",
+    "contact.exclusion": "elements closer than this arc length never touch",
+    "contact.fold": "keep nodes inside the exclusion from folding tighter than the rod (no "
+                    "self-passage, no link lost)",
+    "contact.thinning_force": "the contact spring's pull along elements whose radius thins "
+                              "with stretch (contact does no work on a stretching rod)",
+    "contact.sleep": "take the larger step of a rod without contact until it first touches "
+                     "itself or an end body",
+    "contact.skin": "margin of the Verlet list of candidate pairs",
+    "contact.near_skin": "smallest margin of the short list the force loop runs over",
+    "contact.penetration_limit": "overlap beyond which the run stops as unstable",
+    "solver.dt": "time step; auto = safety × the stable bound from the stiffest mode",
+    "solver.safety": "fraction of the stable time step used when dt is auto",
+    "solver.damping": "linear drag: velocities decay as exp(−damping·t) without forces",
+    "solver.rotational_damping": "drag on the spins; auto = 40·√(G/ρ)/L0 (twist modes "
+                                 "overdamped)",
+    "solver.quadratic_drag": "drag that grows with speed; 0 = off",
+    "solver.strain_rate_damping": "axial Kelvin–Voigt damping time η; damps the stiff "
+                                  "axial and contact vibrations; 0 = off",
+    "solver.hold_until": "a hold ends at equilibrium, or after hold_max_time",
+    "solver.hold_tolerance": "equilibrium: residual force below this fraction of the force "
+                             "scale",
+    "solver.hold_max_time": "longest hold; a hold that has not settled then ends "
+                            "not_converged",
+    "solver.settle_window": "also end a hold once the window-mean shape moves less than "
+                            "hold_tolerance × L0; 0 = residual test only",
+    "solver.max_steps": "a hard cap on the steps of a run (null: none)",
+    "solver.refine_up_to": "a run stopped as under-resolved is run again with twice the "
+                           "elements, up to this many",
+    "solver.refinements": "the same limit as doublings of rod.elements (1: up to twice the "
+                          "scene's count), so that it follows the rod; the larger limit holds",
+    "solver.refine_from": "a refined run goes on from a second before the trip, or starts over",
+    "solver.slow_down_to": "a run still stopped while an end turns is run again at half the "
+                           "twist rate, down to this rate",
+    "solver.stability_probe": "a hold ends only at an equilibrium that survives a small "
+                              "perturbation",
+    "solver.probe_size": "size of the probe's perturbation",
+    "solver.static_stability": "with the probe: a candidate not in contact must also be "
+                               "stable by the model's own stiffness",
+    "output.history_interval": "time between history rows",
+    "output.topology": "compute link, twist and writhe for the history",
+    "output.snapshots": "rod shapes kept besides the final one: auto (all for run, final for "
+                        "sweeps), all, final, or every k-th history row",
+    "pull.distance": "how far the end is pulled (solenoid_loss)",
+    "pull.rate": "pulling speed",
+    "pull.extra_turns": "turns put in during the pull (a diagonal path through the map)",
+    "pull.release": "release instead of pull",
+    "stiffen.factor": "final E / initial E (stiffening)",
+    "stiffen.time": "duration of the stiffening ramp",
+    "compress.slack": "distance the ends approach (helical_buckling)",
+    "compress.time": "time over which slack and turns are put in",
+    "muscle.helix_radius": "radius of the coiled fibre's helix",
+    "muscle.pitch": "pitch of the helix",
+    "muscle.loops": "loops of the helix",
+    "muscle.inserted_twist": "twist inserted in the fibre",
+    "muscle.chirality": "twist and coil of the same (homochiral) or opposite hand",
+    "muscle.growth_factor": "final radius / a0 of the swelling fibre",
+    "muscle.growth_time": "duration of the swelling",
+    "muscle.load": "weight hung on the muscle",
+    "agent.first": "start of the active segment",
+    "agent.last": "end of the active segment",
+    "agent.pull_multiple": "tension the agent relaxes, in F_C",
+    "agent.extra_twist_density": "twist the agent adds over its segment",
+    "agent.at_twist_density": "twist density at which the agent acts",
+    "sweep.scene": "the scene swept: a shipped name or a YAML path (relative to the sweep's "
+                   "file)",
+    "sweep.set": "overrides applied to the scene, as --set would",
+    "sweep.axes": "the axes and their [low, high] ranges (see AXES)",
+    "sweep.sampler": "how points are drawn: random, lhs, sobol, grid, continuation, adaptive, "
+                     "paths; boundaries: runs placed by bracketing (rodphase boundaries)",
+    "sweep.samples": "how many points",
+    "sweep.seed": "seed of the sampler (the same seed gives the same points and results)",
+    "sweep.columns": "paths sampler: loads (columns of the map); null = √samples",
+    "sweep.boundary": "boundaries sampler: tolerance (L/L0 width of a plectoneme-solenoid "
+                      "bracket, 0.005), twist_tolerance (Phi*a width of the triple point's, "
+                      "0.05), levels (twist levels of the first round, 6)",
+}

@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from . import config as C
+from . import config
 from .result import RunResult, rotation_put_in
 from .rod.model import Problem
 from .rod.simulate import clamp_reference, current_radii
@@ -188,7 +188,7 @@ REFINE_BACK = 1.0  # s
 # At Fig 3's triple point (Phi*a 1.92, L/L0 1.13, n = 160) the largest stretch there grew
 # from 1.28 to 1.64 in 5 s of a 0.5 turns/s ramp, and stayed at 1.27 at 0.25 turns/s, where
 # the run ends a plectoneme; neither 320 elements nor a step 0.4 times as long mends all such
-# runs (docs/reproduction.md, "The triple point's failures").
+# runs (docs/history/fig3-corner.md, "The triple point's failures").
 SLOWABLE_GUARDS = ("clamp_lag", "resolution", "shear")
 
 
@@ -272,7 +272,7 @@ def run_scene(scene, *, topology: bool | None = None,
     SLOWABLE_GUARDS); `twist_targets` (turns) makes it a continuation."""
     from .scenes import SCENES, build
 
-    cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
+    cfg = scene if isinstance(scene, config.Frozen) else config.validate_scene(scene, SCENES)
     extra = {} if twist_targets is None else {"twist_targets": twist_targets}
     want_topology = cfg.output.topology if topology is None else topology
 
@@ -307,7 +307,7 @@ def run_scene(scene, *, topology: bool | None = None,
         """The run of `cfg`, refined as solver.refine_up_to allows: (its problem as it
         started, its result, the element counts tried)."""
         tried = [cfg.rod.elements]
-        limit = C.refine_limit(cfg)  # of the scene's rod, not of a refined one
+        limit = config.refine_limit(cfg)  # of the scene's rod, not of a refined one
         refine_from = cfg.solver.refine_from
         origin, result = once(cfg)
         attempted(result, cfg, "start")
@@ -321,8 +321,8 @@ def run_scene(scene, *, topology: bool | None = None,
         while (result.diagnostics.get("guard") in REFINABLE_GUARDS and stored is None
                and min(2 * tried[-1], limit) > tried[-1]):
             elements = min(2 * tried[-1], limit)
-            cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", elements)]),
-                                   SCENES)
+            cfg = config.validate_scene(
+                config.apply_overrides(cfg.plain(), [("rod.elements", elements)]), SCENES)
             resumed = None
             if refine_from == "trip" and elements == 2 * tried[-1] and not extra:
                 resumed = refined_from_trip(result, origin, build(cfg), want_topology,
@@ -352,8 +352,8 @@ def run_scene(scene, *, topology: bool | None = None,
                    f"{result.diagnostics['elements']} elements while an end turned at "
                    f"{rates[-1]:g} turns/s")
         rates.append(rates[-1] / 2)
-        slower = C.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
-        origin, result, more = refined(C.validate_scene(slower, SCENES))
+        slower = config.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
+        origin, result, more = refined(config.validate_scene(slower, SCENES))
         tried += more
         result.diagnostics["notes"].append(
             f"{stopped}; this is the run at {rates[-1]:g} turns/s, from the start "
@@ -491,8 +491,8 @@ def compile_kernel() -> float:
             helper = None
     try:
         with warnings.catch_warnings():  # 8 elements on purpose: a tiny rod compiles the same
-            warnings.simplefilter("ignore", C.ResolutionWarning)
-            cfg = C.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
+            warnings.simplefilter("ignore", config.ResolutionWarning)
+            cfg = config.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
                                     "loading": {"force_multiple": 25, "force_ramp_time": 1e-3,
                                                 "twist_density": 0.1, "twist_rate": 100.0},
                                     "solver": {"hold_max_time": 1e-3, "stability_probe": True}},
@@ -584,7 +584,7 @@ def check_memory(cfg, *, twist_targets: list[float] | None = None, share: int = 
     interval = cfg.output.history_interval
     least = interval * peak / room
     shared = f" per worker ({share} at once)" if share > 1 else ""
-    raise C.ConfigError(
+    raise config.ConfigError(
         f"{where}output.history_interval", interval,
         f"at least {least:.3g} s: {interval:g} s asks for up to {rows:.3g} snapshots × {nodes} "
         f"nodes × 48 bytes = {snapshot_bytes / 2**20:.0f} MiB over {seconds:.4g} s of "

@@ -2,7 +2,7 @@
 
 A store is one HDF5 file, OUT.h5, holding one sweep (or one run): the resolved config and its
 hash as file attributes, one group per finished run under /runs, and an optional per-run
-classification table under /classification. docs/data-format.md describes every name and
+classification table under /classification. docs/reference/data-format.md describes every name and
 unit so that the file can be read with h5py or pandas alone.
 
 Crash safety rests on one rule: OUT.h5 is never modified in place.

@@ -61,9 +61,9 @@ def classify_table(store, run_ids=None, **thresholds) -> pd.DataFrame:
         row = summarize(store.read_run(run_id), **thresholds)
         rows.append({"run_id": run_id} | {k: v for k, v in row.items() if k not in _RUN_COLUMNS})
     table = pd.DataFrame(rows)
-    from . import config as C
+    from .config import stored_config
 
-    return onset_columns(table, C.stored_config(store.attrs.get("config_yaml", "")))
+    return onset_columns(table, stored_config(store.attrs.get("config_yaml", "")))
 
 
 def onset_columns(table: pd.DataFrame, config: dict) -> pd.DataFrame:
@@ -107,7 +107,7 @@ def onset_columns(table: pd.DataFrame, config: dict) -> pd.DataFrame:
 # dimensionless, a count or an index; "": text)
 COLUMNS = {
     "run_id": ("", "the run's name, key into /runs"),
-    "status": ("", "ok, unstable, not_converged or error (see the README)"),
+    "status": ("", "ok, unstable, not_converged or error (docs/reference/statuses.md)"),
     "message": ("", "what ended the run, and what to change if it failed"),
     "wall_time": ("s", "wall-clock time of the run"),
     "steps": ("1", "time steps taken"),

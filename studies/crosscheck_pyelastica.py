@@ -545,7 +545,7 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
 # the rod, the load, the imperfection and the ramps by construction, not by copy.
 
 # The points that fail in the map of 2026-12-04 (sweep.sample_points of configs/fig3_paper.yaml,
-# full precision: Φa, L/L0), docs/reproduction.md "The triple point's failures"
+# full precision: Φa, L/L0), docs/history/fig3-corner.md "The triple point's failures"
 FIG3_FAILED = ((2.4905348515138033, 1.1090010169893503), (2.5258821224793793, 1.079950714390725),
                (2.557734097540379, 1.0524589744396509), (2.5985506212338807, 1.1349544170312584))
 # configs/fig3_paper.yaml's run settings that matter here; refine_up_to and slow_down_to are

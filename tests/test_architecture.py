@@ -1,6 +1,6 @@
-"""The package's shape, checked from its own source: the layers of the README ("Layout"), no
-import that points back up (which also rules out every import cycle), and no function too
-long to read as one page.
+"""The package's shape, checked from its own source: the layers of
+docs/explanation/architecture.md, no import that points back up (which also rules out every
+import cycle), and no function too long to read as one page.
 
 Imports are read with `ast`, the deferred ones inside functions included: an import made
 late to save start-up time is still a dependency.

@@ -1,5 +1,5 @@
 """rodphase against the stored PyElastica 1.0 run of the authors' SolenoidsCase example
-(studies/crosscheck_pyelastica.py, docs/reproduction.md)."""
+(studies/crosscheck_pyelastica.py, docs/history/crosscheck.md)."""
 
 import sys
 from pathlib import Path
@@ -51,6 +51,6 @@ def test_solenoid_final_state_matches_reference(runs):
     assert h["link"][-1] == pytest.approx(ref["link"][-1], abs=0.01)     # 11 turns, none escaped
     for points in (result.positions, ref["final_positions"]):
         assert classify.phase(classify.alignment(points, 0.025, rest_length=1.0)) == "solenoid"
-    # known gaps (docs/reproduction.md, cross-check): onset 2.4 s later, 0.9 turn more writhe
+    # known gaps (docs/history/crosscheck.md): onset 2.4 s later, 0.9 turn more writhe
     assert abs(onset(h["time"], h["writhe"]) - onset(ref["time"], ref["writhe"])) < 4.0
     assert abs(h["writhe"][-1] - ref["writhe"][-1]) < 1.3

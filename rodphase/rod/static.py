@@ -34,10 +34,10 @@ an isolated equilibrium. What is left of the residual lies along one or two soft
 `solve_beside_soft_modes` leaves the eigen-directions of the mass-weighted stiffness nearest
 zero out of the Newton step, and from the kernel's settled solenoid and plectoneme (n = 64 and 80)
 the rest converges to 1e-8 in 9-13 steps while the state moves by 0.013-0.033 radii; the force
-left along the soft modes is reported (docs/performance.md, "A static corrector beside
+left along the soft modes is reported (docs/history/performance.md, "A static corrector beside
 the soft modes"). Stepped in twist from there (`twisted_further` as the predictor), the
 corrector follows such a shape for 0 to 0.1 of Φa only: the shape takes up twist along the
-modes the corrector leaves out (docs/performance.md, "A twist continuation beside the soft
+modes the corrector leaves out (docs/history/performance.md, "A twist continuation beside the soft
 modes").
 
 Unknowns (`StaticModel.unknowns`):
@@ -422,7 +422,7 @@ def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
     n = x.shape[1] - 1
     pairs = candidate_pairs(model, x)
     # reach[a, b]: moving node a changes the contact force on node b (boolean arrays: with
-    # Python sets a call took 54-65 ms at n = 80, with these 14-15 ms, docs/performance.md)
+    # Python sets a call took 54-65 ms at n = 80, with these 14-15 ms, docs/history/performance.md)
     nodes = np.arange(n + 1)
     if model.fold:
         reach = np.abs(nodes[:, None] - nodes[None, :]) <= model.exclusion + 1
@@ -897,7 +897,7 @@ def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
     (eigenvalues of A from −5 to 500 s⁻² where its largest is ~1e8: the loops creep or
     slide), and plain Newton (`solve`) takes huge steps along them and stalls. Left out, the
     rest converges quadratically, and what remains is a force along the soft modes alone,
-    reported (`soft_residual`), not hidden (measured: docs/performance.md, "A static
+    reported (`soft_residual`), not hidden (measured: docs/history/performance.md, "A static
     corrector beside the soft modes").
 
     Each step solves the bordered system of `soft_factorization` (sparse LU) for the loads.
