@@ -134,6 +134,8 @@ def check_box(onset: pd.DataFrame, sweep) -> None:
 # ---------------------------------------------------------------- bracketing (dynamic)
 
 BUCKLED = ("plectoneme", "solenoid", "mixed")
+# failed runs inside one bracket after which it is not narrowed further
+MAX_FAILED = 3
 
 
 @dataclass
@@ -172,16 +174,35 @@ class Level:
             return False
         return None
 
+    def next_probes(self, tolerance: float, count: int = 1) -> list[float]:
+        """`count` extensions that split the gap next_probe would halve into count + 1 equal
+        parts (one round of the trace can use every worker when few levels are left), or
+        none once the bracket is narrow enough."""
+        middle = self.next_probe(tolerance)
+        if middle is None or count <= 1:
+            return [] if middle is None else [middle]
+        a, b = self.bracket()
+        inside = [e for e, _ in self.ordered() if a <= e <= b]
+        left = max(e for e in inside if e < middle)
+        right = min(e for e in inside if e > middle)
+        return [left + (right - left) * i / (count + 1) for i in range(1, count + 1)]
+
     def next_probe(self, tolerance: float) -> float | None:
-        """The next extension to run, or None once the bracket is narrower than tolerance;
-        a failed (or straight) probe inside the bracket splits it, and the wider side is
-        narrowed next."""
+        """The next extension to run, or None once the bracket is narrower than tolerance:
+        a failed (or straight) probe inside the bracket splits it, and the widest gap with a
+        labelled shape at one end at least is narrowed next. A bracket that already holds
+        MAX_FAILED failed runs is left as it is (the model fails there: Fig 3's corner, where
+        the paper's law leaves its range) and says so in its row."""
         bracket = self.bracket()
         if bracket is None:
             return None
         a, b = bracket
         inside = [e for e, _ in self.ordered() if a <= e <= b]
-        width, left, right = max((r - q, q, r) for q, r in zip(inside[:-1], inside[1:]))
+        if sum(1 for e in inside if self.probes[e] not in BUCKLED) >= MAX_FAILED:
+            return None
+        gaps = [(r - q, q, r) for q, r in zip(inside[:-1], inside[1:])
+                if self.probes[q] in BUCKLED or self.probes[r] in BUCKLED]
+        width, left, right = max(gaps)
         return 0.5 * (left + right) if width > tolerance else None
 
     def row(self) -> dict | None:
@@ -200,7 +221,9 @@ class Level:
         if mixed:
             notes.append(f"{len(mixed)} mixed run(s) below the first solenoid")
         if failed:
-            notes.append(f"{failed} run(s) on this level failed")
+            notes.append(f"{failed} run(s) on this level failed"
+                         + ("; the bracket is left this wide" if b - a > 0 and
+                            self.next_probe(0.0) is None else ""))
         if not monotone:
             notes.append("a solenoid below a plectoneme on this level")
         return {"kind": "plectoneme_solenoid", "extension": 0.5 * (a + b),
@@ -235,10 +258,11 @@ def first_levels(onset: pd.DataFrame, sweep, settings: Settings) -> list[Level]:
 
 
 def boundary_rounds(sweep, scene, store, settings: Settings | None = None,
-                    onset: pd.DataFrame | None = None) -> Iterator[list]:
+                    onset: pd.DataFrame | None = None, workers: int = 1) -> Iterator[list]:
     """The rounds of runs that trace the plectoneme–solenoid boundary and the triple point:
     each yielded list of Jobs is run into `store` before the next is made from the labels
-    (as sweep.adaptive_rounds). Deterministic for a sweep and the labels stored."""
+    (as sweep.adaptive_rounds). Deterministic for a sweep, `workers` and the labels stored
+    (a run's id is its point, so a trace resumed with other workers reuses what it can)."""
     from .sweep import Job, _registered_builder, scene_for
     from .tabulate import summarize
 
@@ -263,8 +287,11 @@ def boundary_rounds(sweep, scene, store, settings: Settings | None = None,
         yield list(unique.values())
         for rid, level, extension, _ in pending:
             level.probes[extension] = summarize(store.read_run(rid))["phase"]
-        pending = [job(lv, e) for lv in levels
-                   if (e := lv.next_probe(settings.tolerance)) is not None]
+        active = [lv for lv in levels if lv.next_probe(settings.tolerance) is not None]
+        # few levels left: split their gaps in more parts, so that every worker has a run
+        count = max(1, workers // max(len(active), 1))
+        pending = [job(lv, e) for lv in active
+                   for e in lv.next_probes(settings.tolerance, count)]
         # the triple point: between the highest level without a boundary and the lowest with
         # one (both known), a new level halves the gap until it is below twist_tolerance
         gap = triple_gap(levels)
@@ -409,7 +436,7 @@ def trace(sweep, scene, output: str | None, *, only_onset: bool = False, jobs: i
     report = run_sweep(sweep, scene, output, jobs=jobs, backend=backend, scheduler=scheduler,
                        progress=progress, echo=echo, replace=replace,
                        rounds_of=lambda store: boundary_rounds(sweep, scene, store, settings,
-                                                               onset))
+                                                               onset, workers=jobs))
     if report.stopped_by:
         return Trace(lines(onset, [], settings), {}, report, onset_seconds)
     from ._version import __version__

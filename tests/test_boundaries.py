@@ -33,6 +33,10 @@ def test_a_level_bisects_between_its_last_plectoneme_and_first_solenoid():
     assert (row["extension_low"], row["extension_high"]) == (1.075, 1.15)
     assert row["extension"] == pytest.approx(1.1125) and row["note"] == ""
     assert lv.next_probe(0.1) is None  # narrower than the tolerance: done
+    # with workers to spare, the widest gap is split in more parts in one round
+    wide = level({1.0: "plectoneme", 1.3: "solenoid"})
+    assert wide.next_probes(0.005, 2) == pytest.approx([1.1, 1.2])
+    assert wide.next_probes(0.5, 2) == []
 
 
 def test_a_mixed_run_counts_on_the_plectoneme_side_and_widens_the_band():
@@ -54,6 +58,12 @@ def test_a_failed_probe_is_stepped_around_and_counted():
     lv.probes[1.225] = "solenoid"
     assert lv.next_probe(0.01) == pytest.approx(1.075)  # (1.0, 1.15) is now the widest gap
     assert lv.row()["failed"] == 1 and "failed" in lv.row()["note"]
+    # where the model fails (Fig 3's corner) a bracket holding three failed runs is left as
+    # it is, and its row says so, instead of spending runs on failures
+    corner = level({1.0: "plectoneme", 1.3: "solenoid", 1.1: "failed", 1.15: "failed",
+                    1.2: "failed"})
+    assert corner.next_probe(0.01) is None
+    assert "left this wide" in corner.row()["note"] and corner.row()["failed"] == 3
 
 
 def test_a_solenoid_below_a_plectoneme_is_flagged_not_hidden():
