@@ -69,12 +69,26 @@ CASES = {
         turns=10, time_start_twist=0.0, time_twist=5.0 * 10, time_relax=50.0,
         n_elem=150, force=0.0, initial_kick=True,
     ),
+    # Fig 4a through the authors' code (issue #49): the SolenoidsCase with its 13 turns
+    # actually put in (the end frame prescribed during the twist, so the damper cannot eat
+    # 2 of them), held 10 s, then the end pulled 0.4 m at 5 mm/s with its frame held, as
+    # rodphase's solenoid_loss scene pulls. Not an example of PyElastica's: its own settings
+    # (n, dt, contact, damping, 300 N) with the paper's pull appended.
+    "solenoid_pull": dict(
+        turns=13, time_start_twist=10.0, time_twist=5.0 * 13, time_relax=10.0,
+        n_elem=100, force=300.0, initial_kick=False,
+        prescribed_twist=True, pull_distance=0.4, pull_rate=0.005,
+    ),
 }
 
 
 def settings(case: str) -> dict:
     c = dict(CASES[case])
-    c["final_time"] = c["time_start_twist"] + c["time_twist"] + c["time_relax"]
+    c.setdefault("prescribed_twist", False)
+    c.setdefault("pull_distance", 0.0)
+    c.setdefault("pull_rate", 1.0)
+    c["time_pull"] = c["pull_distance"] / c["pull_rate"]
+    c["final_time"] = c["time_start_twist"] + c["time_twist"] + c["time_relax"] + c["time_pull"]
     n = c["n_elem"]
     c["dt_nominal"] = 0.0025 * BASE_LENGTH / n
     c["total_steps"] = int(c["final_time"] / c["dt_nominal"])
@@ -90,13 +104,20 @@ def settings(case: str) -> dict:
 # ------------------------------------------------------------------ PyElastica reference
 
 
-def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path) -> None:
+def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path,
+                  thinning: float = 0.0, contact_from: float = 0.0) -> None:
+    """The case in PyElastica 1.0; `thinning` 1.0 adds rodphase's thinning force to the
+    self-contact (studies/pyelastica_thinning.py), 0.0 is the example's RodSelfContact.
+    `contact_from` > 0 skips the contact loop while the rod is straight (its force is then
+    exactly zero; the pairs within reach at the switch-on are printed and stored)."""
     import elastica as ea
     from elastica._rotations import _get_rotation_matrix
 
     from rodphase.studytools import machine
 
     c = settings(case)
+    c["thinning"] = thinning
+    c["contact_from"] = contact_from
     if final_time is not None:
         c["final_time_requested"] = c["final_time"]
         c["final_time"] = float(final_time)
@@ -121,6 +142,9 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
                           time_step=c["dt_nominal"])
 
     t0, tt, turns = c["time_start_twist"], c["time_twist"], c["turns"]
+    prescribed = c["prescribed_twist"]
+    t_pull, pull_rate = t0 + tt + c["time_relax"], c["pull_rate"]
+    pulled = c["pull_distance"] > 0
 
     class TwistEnd(ea.ConstraintBase):
         """Start clamped; end free before the twist, sliding along y and spun during it,
@@ -134,16 +158,30 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
             axis /= np.linalg.norm(axis)
             self.final_end = _get_rotation_matrix(-theta, axis.reshape(3, 1)).reshape(3, 3) @ director_end
             self.ang_vel = theta / tt * axis
+            self.axis = axis.reshape(3, 1)
+            self.Q_end0 = director_end.copy()
             self.x0 = position_start.copy()
             self.Q0 = director_start.copy()
+            self.y_pull0 = None
 
         def constrain_values(self, system, time):
+            if pulled and time > t_pull:
+                # the pull: the end's axial position prescribed, its frame held
+                if self.y_pull0 is None:
+                    self.y_pull0 = float(system.position_collection[1, -1])
+                system.position_collection[1, -1] = self.y_pull0 + pull_rate * (time - t_pull)
             if time > tt + t0:
                 system.position_collection[..., 0] = self.x0
                 system.position_collection[0, -1] = 0.0
                 system.position_collection[2, -1] = 0.0
                 system.director_collection[..., 0] = self.Q0
                 system.director_collection[..., -1] = self.final_end
+            elif prescribed and time >= t0:
+                # the end frame turned by exactly the nominal angle so far: the damper
+                # (which scales the end's omega after the constraint) cannot eat twist
+                angle = 2.0 * turns * np.pi * (time - t0) / tt
+                system.director_collection[..., -1] = (
+                    _get_rotation_matrix(-angle, self.axis).reshape(3, 3) @ self.Q_end0)
 
         def constrain_rates(self, system, time):
             system.velocity_collection[..., 0] = 0.0
@@ -151,6 +189,8 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
             if time > tt + t0:
                 system.velocity_collection[..., -1] = 0.0
                 system.omega_collection[..., -1] = 0.0
+                if pulled and time > t_pull:
+                    system.velocity_collection[1, -1] = pull_rate
             elif time >= t0:
                 system.velocity_collection[0, -1] = 0.0
                 system.velocity_collection[2, -1] = 0.0
@@ -162,9 +202,23 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
     if c["force"]:
         sim.add_forcing_to(rod).using(ea.EndpointForces, np.zeros(3), c["force"] * y,
                                       ramp_up_time=t0 - 1)
-    sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=CONTACT_K, nu=CONTACT_NU)
+    contact_holder = {}
+    if thinning or contact_from > 0:
+        from pyelastica_thinning import ThinningSelfContact
 
-    frames = {"time": [], "x": [], "d1": [], "omega_end": []}
+        class Gated(ThinningSelfContact):  # keeps a handle on the instance PyElastica makes
+            def __init__(self, *a, **kw):
+                super().__init__(*a, **kw)
+                contact_holder["contact"] = self
+
+        sim.detect_contact_between(rod, rod).using(Gated, k=CONTACT_K, nu=CONTACT_NU,
+                                                   thinning=thinning, active_from=contact_from)
+    else:
+        sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=CONTACT_K, nu=CONTACT_NU)
+
+    # the end node's internal and external force at each frame: with the end held, the
+    # force the puller must apply is −(internal + contact) along the axis
+    frames = {"time": [], "x": [], "d1": [], "omega_end": [], "internal_end": [], "external_end": []}
 
     class Record(ea.CallBackBaseClass):
         def make_callback(self, system, time, current_step):
@@ -173,21 +227,26 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
                 frames["x"].append(system.position_collection.T.copy())
                 frames["d1"].append(system.director_collection[0].T.copy())
                 frames["omega_end"].append(system.omega_collection[:, -1].copy())
+                frames["internal_end"].append(system.internal_forces[:, -1].copy())
+                frames["external_end"].append(system.external_forces[:, -1].copy())
 
     sim.collect_diagnostics(rod).using(Record)
     sim.finalize()
 
     info = {"case": case, "settings": c, "machine": machine(), "elastica": "1.0.0",
-            "source": f"GazzolaLab/PyElastica@{SOURCE_COMMIT}:{SOURCE[case]}",
+            "source": f"GazzolaLab/PyElastica@{SOURCE_COMMIT}:{SOURCE.get(case, SOURCE['solenoid'])}",
             "frame_interval": every * dt, "steps": steps}
 
     def save(done: bool) -> None:
         info["cpu_time"] = time.process_time() - cpu0
         info["wall_time"] = time.perf_counter() - wall0
         info["finished"] = done
+        if "contact" in contact_holder:
+            info["pairs_at_contact_switch_on"] = contact_holder["contact"].pairs_at_switch_on
         np.savez(raw, time=np.array(frames["time"]), x=np.array(frames["x"]),
                  d1=np.array(frames["d1"]), omega_end=np.array(frames["omega_end"]),
-                 info=json.dumps(info))
+                 internal_end=np.array(frames["internal_end"]),
+                 external_end=np.array(frames["external_end"]), info=json.dumps(info))
 
     stepper = ea.PositionVerlet()
     t = np.float64(0.0)
@@ -237,10 +296,14 @@ def reduce_reference(case: str, raw: Path, out: Path, sample: float = 0.5) -> No
     if idx[-1] != len(t) - 1:
         idx = np.append(idx, len(t) - 1)
     lk, tw, wr = topology_history(X[idx], D[idx])
+    forces = {}
+    if "internal_end" in r.files:  # every raw frame: a force drop can be short
+        forces = {"force_time": t, "internal_end": r["internal_end"],
+                  "external_end": r["external_end"], "end_position_all": X[:, -1, :]}
     np.savez_compressed(
         out, time=t[idx], end_rotation=rot[idx], link=lk, twist=tw, writhe=wr,
         end_position=X[idx, -1, :], final_positions=X[-1], final_d1=D[-1],
-        info=json.dumps(info))
+        info=json.dumps(info), **forces)
     print(f"wrote {out} ({out.stat().st_size / 1e3:.0f} kB, {len(idx)} samples); "
           f"final Lk={lk[-1]:.3f} Tw={tw[-1]:.3f} Wr={wr[-1]:.3f}, "
           f"end rotation {rot[-1] / (2 * np.pi):.3f} turns")
@@ -403,15 +466,38 @@ def stop_at(problem, final_time: float):
     return problem
 
 
+def pyelastica_clamp_sets(case: str) -> list[tuple[str, object]]:
+    """The example's clamps, emulated in rodphase without touching its kernel (issue #49).
+
+    PyElastica prescribes the end elements' frames (and the end nodes): its first and last
+    elements are rigid, and the rod bends and twists only between nodes 1 and n-1. rodphase
+    clamps the frame at the end nodes themselves (a spring over half an element), so all of
+    its n elements deform. The rod that deforms in PyElastica is therefore emulated by a
+    rodphase rod two elements shorter at the same element length (n-2 elements, L - 2 L/n),
+    whose clamps sit where PyElastica's second and last-but-one nodes are; its end lies
+    one stretched element short of PyElastica's end node at each end, 2 l e in all
+    (`clamp_end_offset`)."""
+    c = settings(case)
+    n = c["n_elem"]
+    return [("rod.elements", n - 2), ("rod.length", BASE_LENGTH * (n - 2) / n)]
+
+
 def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
                  out: Path, bodies: str = "none", kick_scale: float = 1.0,
-                 reference: Path | None = None, final_time: float | None = None) -> dict:
+                 reference: Path | None = None, final_time: float | None = None,
+                 extra_sets=(), clamp: str = "rodphase") -> dict:
+    """The case in rodphase; `extra_sets` ((key, value) pairs of SCENE_SCHEMA) go on top of
+    the mapped settings, and `clamp` "pyelastica" emulates the example's clamps
+    (`pyelastica_clamp_sets`)."""
     from rodphase import classify
     from rodphase.runner import run
     from rodphase.studytools import machine
     from rodphase.topology import topology_history
 
     sets = rodphase_sets(case, contact, dt, rotation_damping, bodies)
+    if clamp == "pyelastica":
+        sets += pyelastica_clamp_sets(case)
+    sets += list(extra_sets)
     problem = build_problem(case, sets, twist, kick, kick_scale, reference)
     if final_time is not None:
         problem = stop_at(problem, final_time)
@@ -427,6 +513,7 @@ def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotati
     d = result.diagnostics
     info = {"case": case, "sets": [[k, v] for k, v in sets], "twist": twist, "kick": kick, "kick_scale": kick_scale,
             "contact": contact, "bodies": bodies, "rotational_damping": rotation_damping,
+            "clamp": clamp,
             "status": result.status, "message": result.message, "cpu_time": cpu,
             "dt": d["dt"], "dt_bound": d["dt_bound"], "steps": d["steps"],
             "us_per_step": d["us_per_step"], "max_pairs": d.get("max_pairs"),
@@ -836,11 +923,18 @@ def main(argv=None) -> int:
     a.add_argument("case", choices=sorted(CASES))
     a.add_argument("--final-time", type=float, default=None, help="stop early (s)")
     a.add_argument("--frame-interval", type=float, default=0.05, help="raw frames (s)")
+    a.add_argument("--thinning", type=float, default=0.0,
+                   help="1.0 adds rodphase's thinning force to PyElastica's self-contact (issue #49)")
+    a.add_argument("--sample", type=float, default=0.5, help="s between the reduced record's topology samples")
+    a.add_argument("--contact-from", type=float, default=0.0,
+                   help="s; skip the contact loop before it (the straight rod touches nowhere)")
     a.add_argument("--raw", type=Path, default=None)
     a.add_argument("-o", "--out", type=Path, default=None)
     b = sub.add_parser("reduce", help="raw PyElastica frames -> tests/data npz")
     b.add_argument("case", choices=sorted(CASES))
     b.add_argument("--raw", type=Path, default=None)
+    b.add_argument("--sample", type=float, default=0.5, help="s between topology samples")
+    b.add_argument("--thinning", type=float, default=0.0, help="names the files as `reference --thinning`")
     b.add_argument("-o", "--out", type=Path, default=None)
     r = sub.add_parser("rodphase", help="run the case's settings in rodphase")
     r.add_argument("case", choices=sorted(CASES))
@@ -896,14 +990,16 @@ def main(argv=None) -> int:
                 args.png or IMG / f"crosscheck_{args.case}.png")
         return 0
 
-    raw = args.raw or Path(f"/tmp/crosscheck_raw_{args.case}.npz")
-    out = args.out or DATA / f"crosscheck_{args.case}.npz"
+    tag = args.case + ("_thinning" if getattr(args, "thinning", 0.0) else "")
+    raw = args.raw or Path(f"/tmp/crosscheck_raw_{tag}.npz")
+    out = args.out or DATA / f"crosscheck_{tag}.npz"
     if args.cmd == "reference":
-        run_reference(args.case, args.final_time, args.frame_interval, raw)
+        run_reference(args.case, args.final_time, args.frame_interval, raw, args.thinning,
+                      args.contact_from)
         out.parent.mkdir(parents=True, exist_ok=True)
-        reduce_reference(args.case, raw, out)
+        reduce_reference(args.case, raw, out, args.sample)
     elif args.cmd == "reduce":
-        reduce_reference(args.case, raw, out)
+        reduce_reference(args.case, raw, out, args.sample)
     return 0
 
 
