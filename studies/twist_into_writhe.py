@@ -184,6 +184,122 @@ def figure(case: str, found: dict, png: Path) -> None:
     plt.close(fig)
 
 
+# ------------------------------------------------------------------ Fig 4a: the pull
+
+FIG4A_TURNS = {"13.0": 2.042, "10.2": 1.6}  # turns -> loading.twist_density of solenoid_loss
+DU_SAMPLE = 0.0025  # m of ΔU between writhe samples: 0.5 s of the 5 mm/s pull, as STEP_SAMPLE
+FORCE_WINDOW = 0.01  # m of ΔU: the force is a 10 mm running mean before its drops are found
+FORCE_DROP = 1.0  # F_C: a drop of the smoothed force counts when deeper (studies/figures.py)
+
+
+def run_fig4a_rodphase(turns: str) -> Path:
+    """rodphase's shipped Fig 4a scene (solenoid_loss) at `turns`: ΔU, F/F_C, Wr of the pull."""
+    from rodphase import config as C
+    from rodphase.analysis import stage_rows
+    from rodphase.runner import run_scene
+    from rodphase.scenes import SCENES
+    from rodphase.studytools import machine
+
+    cfg = C.load_scene("solenoid_loss", [("loading.twist_density", FIG4A_TURNS[turns])], SCENES)
+    r = run_scene(cfg)
+    h = r.history
+    rows = np.where(stage_rows(r, "pull"))[0]
+    fc = C.buckling_force(cfg)
+    path = OUT / f"fig4a_rodphase_{turns}.npz"
+    OUT.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(
+        path, du=h["end_displacement"][rows] - h["end_displacement"][rows[0]],
+        force=h["end_force"][rows] / fc, writhe=h["writhe"][rows],
+        info=json.dumps({"status": r.status, "turns": turns, "twist_density": FIG4A_TURNS[turns],
+                         "F_C": fc, "wall_time": r.diagnostics["wall_time"], "machine": machine()},
+                        default=str))
+    print(f"fig4a rodphase {turns} turns: {r.status}, wall {r.diagnostics['wall_time']:.0f} s -> {path}")
+    return path
+
+
+def fig4a_pyelastica(path: Path) -> dict:
+    """ΔU, F/F_C and Wr of the pull in the PyElastica reference (case solenoid_pull).
+
+    The end node is held, so the puller's force is what holds it against the rod: minus the
+    node's internal force minus the contact force on it, i.e. −(internal + external − 300 N)
+    along the axis, the 300 N of EndpointForces counted as the puller's."""
+    r = np.load(path)
+    c = X.settings("solenoid_pull")
+    t_pull = c["time_start_twist"] + c["time_twist"] + c["time_relax"]
+    t = r["force_time"]
+    pull = t >= t_pull
+    y = r["end_position_all"][:, 1]
+    force = -(r["internal_end"][:, 1] + r["external_end"][:, 1] - c["force"])
+    fc = math.pi**2 * X.E * math.pi * X.BASE_RADIUS**4 / 4 / X.BASE_LENGTH**2  # 3.028 N
+    du = y[pull] - y[pull][0]
+    tw = r["time"] >= t_pull
+    du_w = np.interp(r["time"][tw], t, y) - y[pull][0]
+    return {"du": du, "force": force[pull] / fc, "du_writhe": du_w, "writhe": r["writhe"][tw],
+            "final_time": float(t[-1]), "complete": bool(t[-1] >= c["final_time"] - 0.1)}
+
+
+
+def fig4a_measure(du, force, du_w, writhe) -> dict:
+    from rodphase.analysis import sawtooth_drops, smooth, writhe_steps
+
+    step = float(np.median(np.diff(du)))
+    window = max(1, int(round(FORCE_WINDOW / step)))
+    fs = smooth(force, window)
+    drops = sawtooth_drops(du, fs, window, min_drop=FORCE_DROP, merge=0.03)
+    grid = np.arange(0.0, du_w[-1] + 1e-12, DU_SAMPLE)
+    w = np.interp(grid, du_w, writhe)
+    losses = writhe_steps(grid, w, direction=-1) if len(grid) >= 3 else []
+    return {"smoothed": fs, "drops": drops, "losses": losses,
+            "writhe_start": float(writhe[0]), "writhe_end": float(writhe[-1])}
+
+
+def fig4a(png: Path) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = {}
+    ref = DATA / "crosscheck_solenoid_pull.npz"
+    if ref.exists():
+        pe = fig4a_pyelastica(ref)
+        tag = "" if pe["complete"] else f" (to ΔU {pe['du'][-1]:.2f} m)"
+        runs[f"PyElastica 1.0, example's settings, 13 turns{tag}"] = (
+            pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
+    for turns in FIG4A_TURNS:
+        p = OUT / f"fig4a_rodphase_{turns}.npz"
+        if p.exists():
+            r = np.load(p)
+            runs[f"rodphase solenoid_loss, {turns} turns"] = (r["du"], r["force"], r["du"], r["writhe"])
+    fig, (axf, axw) = plt.subplots(2, 1, figsize=(7.5, 7), sharex=True)
+    lines = ["| run | force drops > 1 F_C (F_C @ ΔU m) | writhe-loss steps ≥ 0.3 turns (turns @ ΔU m) | "
+             "Wr start → end | F start → end (F_C, 10 mm mean) |", "|---|---|---|---|---|"]
+    for label, (du, f, du_w, w) in runs.items():
+        m = fig4a_measure(du, f, du_w, w)
+        base, = axf.plot(du, m["smoothed"], lw=1.5, label=label)
+        axf.plot(du, f, lw=0.4, alpha=0.35, color=base.get_color())
+        for d in m["drops"]:
+            axf.annotate("", (d["bottom_x"], d["bottom_y"]), (d["peak_x"], d["peak_y"]),
+                         arrowprops={"arrowstyle": "->", "color": base.get_color(), "lw": 1.2})
+        axw.plot(du_w, w, lw=1.5, color=base.get_color(), label=label)
+        drops = ", ".join(f"{d['peak_y'] - d['bottom_y']:.1f} @ {d['peak_x']:.3f}" for d in m["drops"]) or "none"
+        losses = ", ".join(f"{s['gain']:.2f} @ {s['at']:.3f}" for s in m["losses"]) or "none"
+        lines.append(f"| {label} | {len(m['drops'])}: {drops} | {len(m['losses'])}: {losses} | "
+                     f"{m['writhe_start']:.2f} → {m['writhe_end']:.2f} | "
+                     f"{m['smoothed'][0]:.1f} → {m['smoothed'][-1]:.1f} |")
+    axf.set_ylabel("end force F/F_C (thin: raw; thick: 10 mm mean)")
+    axw.set_ylabel("Wr [turns]")
+    axw.set_xlabel("end displacement ΔU [m] (pulled at 5 mm/s, end rotation held)")
+    axf.legend(fontsize=7)
+    axf.set_title("Fig 4a: a solenoid at 99 F_C pulled, PyElastica 1.0 and rodphase")
+    for ax in (axf, axw):
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -194,7 +310,16 @@ def main(argv=None) -> int:
     b = sub.add_parser("table", help="print the table of CASE and draw its figure")
     b.add_argument("case", choices=sorted(ROWS))
     b.add_argument("--png", type=Path, default=None)
+    f = sub.add_parser("fig4a", help="the pulled solenoid: rodphase's runs (if missing) and the figure")
+    f.add_argument("--run", action="store_true", help="run rodphase's 13- and 10.2-turn pulls again")
+    f.add_argument("--png", type=Path, default=None)
     args = ap.parse_args(argv)
+    if args.cmd == "fig4a":
+        for turns in FIG4A_TURNS:
+            if args.run or not (OUT / f"fig4a_rodphase_{turns}.npz").exists():
+                run_fig4a_rodphase(turns)
+        print(fig4a(args.png or IMG / "twist_into_writhe_fig4a.png"))
+        return 0
     if args.cmd == "rows":
         for name, label, _ in ROWS[args.case]:
             if args.only and name not in args.only:

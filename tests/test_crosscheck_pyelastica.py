@@ -54,3 +54,49 @@ def test_solenoid_final_state_matches_reference(runs):
     # known gaps (docs/reproduction.md, cross-check): onset 2.4 s later, 0.9 turn more writhe
     assert abs(onset(h["time"], h["writhe"]) - onset(ref["time"], ref["writhe"])) < 4.0
     assert abs(h["writhe"][-1] - ref["writhe"][-1]) < 1.3
+
+
+# ------------------------------------------------- PyElastica's contact loop, rewritten (issue #49)
+
+
+def _contact_state(name, rng, jitter):
+    x = np.load(ROOT / "tests" / "data" / f"crosscheck_{name}.npz")["final_positions"].T.copy()
+    x = x + rng.normal(scale=jitter, size=x.shape)
+    n = x.shape[1] - 1
+    edges = np.diff(x, axis=1)
+    lengths = np.linalg.norm(edges, axis=0)
+    radius = np.sqrt(np.pi * 0.025**2 / n / lengths / np.pi)  # PyElastica's thinned radius
+    return x, radius, lengths, edges / lengths, rng.normal(scale=1e-2, size=x.shape)
+
+
+def test_rewritten_contact_loop_is_pyelasticas_bit_for_bit():
+    # the study's scalar loop (thinning 0) against PyElastica 1.0's own, on touching
+    # solenoids and plectonemes jittered by up to a sixth of the radius
+    pytest.importorskip("elastica", reason="PyElastica is the bench extra (make bench-extra)")
+    import crosscheck_pyelastica as cc
+    from elastica._contact_functions import _calculate_contact_forces_self_rod
+
+    rng = np.random.default_rng(49)
+    for name in ("solenoid", "plectoneme"):
+        for jitter in (0.0, 0.001, 0.004):
+            x, radius, lengths, tangents, v = _contact_state(name, rng, jitter)
+            theirs, ours = np.zeros_like(x), np.zeros_like(x)
+            _calculate_contact_forces_self_rod(x[:, :-1], radius, lengths, tangents, v, theirs, 1e4, 10.0)
+            cc.self_contact_with_thinning(x[:, :-1], radius, lengths, tangents, v, ours, 1e4, 10.0, 0.0)
+            assert np.abs(theirs).max() > 1.0  # the state is in contact
+            assert np.array_equal(ours, theirs), (name, jitter)
+
+
+def test_thinning_term_is_internal_and_lengthens_the_touching_elements():
+    import crosscheck_pyelastica as cc
+
+    rng = np.random.default_rng(0)
+    x, radius, lengths, tangents, v = _contact_state("solenoid", rng, 0.0)
+    plain, thinned = np.zeros_like(x), np.zeros_like(x)
+    cc.self_contact_with_thinning(x[:, :-1], radius, lengths, tangents, v, plain, 1e4, 10.0, 0.0)
+    cc.self_contact_with_thinning(x[:, :-1], radius, lengths, tangents, v, thinned, 1e4, 10.0, 1.0)
+    extra = thinned - plain
+    assert np.abs(extra).max() > 1.0
+    assert np.allclose(extra.sum(axis=1), 0.0, atol=1e-9)  # no net force
+    # its power on the element lengths, Σ (f_{i+1} − f_i)·t_i, is positive: it stretches them
+    assert np.sum((extra[:, 1:] - extra[:, :-1]) * tangents) > 0
