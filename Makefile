@@ -110,7 +110,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 .PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
 	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
-	static-path hold-budget energy-audit
+	static-path hold-budget energy-audit twist-into-writhe twist-into-writhe-references
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -188,6 +188,21 @@ crosscheck: $(STAMP)  ## PyElastica's own example CASE (default solenoid) in rod
 
 crosscheck-reference: bench-extra  ## rerun example CASE in PyElastica 1.0 into tests/data (about an hour)
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference $(CASE)
+
+twist-into-writhe: $(STAMP)  ## steps of twist into writhe, rodphase vs PyElastica one change at a time, and Fig 4a in both (docs/explanation/twist-into-writhe.md; ~30 min)
+	$(BIN)/python studies/twist_into_writhe.py rows solenoid
+	$(BIN)/python studies/twist_into_writhe.py rows plectoneme
+	$(BIN)/python studies/twist_into_writhe.py table solenoid
+	$(BIN)/python studies/twist_into_writhe.py table plectoneme
+	$(BIN)/python studies/twist_into_writhe.py fig4a
+
+# dt 1e-4 s (4x the example's, half rodphase's bound): the twist prescribed at the example's
+# as-run rate, the kick scaled to its force; the plain SolenoidsCase at that dt checks the step
+AS_RUN = --dt 1e-4 --prescribe-twist 0.8279066 --final-time 85 --contact-from 50
+twist-into-writhe-references: bench-extra  ## its PyElastica runs into tests/data: SolenoidsCase + thinning, 13-turn solenoid pulled, SolenoidsCase at dt 1e-4 (~1 h CPU)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 $(AS_RUN)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --dt 1e-4 --contact-from 45 --sample 0.1
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_dt1e-4.npz -o tests/data/crosscheck_solenoid_dt1e-4.npz
 
 straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/performance.md)
 	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/performance.md

@@ -60,6 +60,9 @@ POISSON = 0.5  # shear_modulus = E / (poisson + 1) = 2E/3
 CONTACT_K = 1e4  # RodSelfContact(k=1e4, nu=10)
 CONTACT_NU = 10.0
 KICK = 1e-4  # velocity_collection[2, n_elem // 2] -= 1e-4, every step of the twist
+# the SolenoidsCase end's rate as run, over the nominal 0.2 turns/s: the damper's
+# exp(-2 dt 3200)^e per step (tests/data/crosscheck_solenoid.npz: 1.0403781 rad/s from 10 s)
+AS_RUN_RATE = 0.8279066
 
 CASES = {
     "solenoid": dict(
@@ -106,11 +109,17 @@ def settings(case: str) -> dict:
 
 
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path,
-                  thinning: float = 0.0, contact_from: float = 0.0) -> None:
+                  thinning: float = 0.0, contact_from: float = 0.0,
+                  dt_override: float | None = None, prescribe_twist: float | None = None) -> None:
     """The case in PyElastica 1.0; `thinning` 1.0 adds rodphase's thinning force to the
     self-contact (studies/pyelastica_thinning.py), 0.0 is the example's RodSelfContact.
     `contact_from` > 0 skips the contact loop while the rod is straight (its force is then
-    exactly zero; the pairs within reach at the switch-on are printed and stored)."""
+    exactly zero; the pairs within reach at the switch-on are printed and stored).
+    `dt_override` replaces the example's step (the damper is exact per step, whatever the step; the
+    twist-phase kick, a velocity taken off every step, is scaled by dt/dt_example so that it
+    stays the same 0.04 N point force). `prescribe_twist` F turns the end frame at exactly F
+    times the nominal rate during the twist (F = AS_RUN_RATE reproduces the example's damped
+    rate, which a larger step would damp further), then the example's snap to the final frame."""
     import elastica as ea
     from elastica._rotations import _get_rotation_matrix
 
@@ -124,6 +133,11 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
         c["final_time"] = float(final_time)
     n = c["n_elem"]
     dt = c["dt"]  # the example steps with final_time / total_steps (of its full run)
+    kick = KICK
+    if dt_override is not None:
+        kick = KICK * dt_override / dt
+        dt = c["dt"] = float(dt_override)
+        c["kick_velocity_per_step"] = kick
     steps = int(round(c["final_time"] / dt))
     every = max(1, int(round(frame_interval / dt)))
 
@@ -140,10 +154,12 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
         rod.velocity_collection[2, n // 2] -= KICK
     sim.append(rod)
     sim.dampen(rod).using(ea.AnalyticalLinearDamper, damping_constant=c["damping_constant"],
-                          time_step=c["dt_nominal"])
+                          time_step=dt if dt_override is not None else c["dt_nominal"])
 
     t0, tt, turns = c["time_start_twist"], c["time_twist"], c["turns"]
-    prescribed = c["prescribed_twist"]
+    prescribed = c["prescribed_twist"] or prescribe_twist is not None
+    rate_factor = 1.0 if prescribe_twist is None else float(prescribe_twist)
+    c["twist_rate_factor"] = rate_factor
     t_pull, pull_rate = t0 + tt + c["time_relax"], c["pull_rate"]
     pulled = c["pull_distance"] > 0
 
@@ -180,7 +196,7 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
             elif prescribed and time >= t0:
                 # the end frame turned by exactly the nominal angle so far: the damper
                 # (which scales the end's omega after the constraint) cannot eat twist
-                angle = 2.0 * turns * np.pi * (time - t0) / tt
+                angle = rate_factor * 2.0 * turns * np.pi * (time - t0) / tt
                 system.director_collection[..., -1] = (
                     _get_rotation_matrix(-angle, self.axis).reshape(3, 3) @ self.Q_end0)
 
@@ -196,7 +212,7 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
                 system.velocity_collection[0, -1] = 0.0
                 system.velocity_collection[2, -1] = 0.0
                 system.omega_collection[..., -1] = -self.ang_vel
-                system.velocity_collection[2, system.n_elems // 2] -= KICK
+                system.velocity_collection[2, system.n_elems // 2] -= kick
 
     sim.constrain(rod).using(TwistEnd, constrained_position_idx=(0, -1),
                              constrained_director_idx=(0, -1))
@@ -1140,6 +1156,10 @@ def main(argv=None) -> int:
     a.add_argument("--thinning", type=float, default=0.0,
                    help="1.0 adds rodphase's thinning force to PyElastica's self-contact (issue #49)")
     a.add_argument("--sample", type=float, default=0.5, help="s between the reduced record's topology samples")
+    a.add_argument("--dt", type=float, default=None,
+                   help="s; replaces the example's step (the kick is scaled to the same force)")
+    a.add_argument("--prescribe-twist", type=float, default=None, metavar="FACTOR",
+                   help="turn the end frame at FACTOR x the nominal rate (the SolenoidsCase as run: 0.8279066)")
     a.add_argument("--contact-from", type=float, default=0.0,
                    help="s; skip the contact loop before it (the straight rod touches nowhere)")
     a.add_argument("--raw", type=Path, default=None)
@@ -1209,7 +1229,7 @@ def main(argv=None) -> int:
     out = args.out or DATA / f"crosscheck_{tag}.npz"
     if args.cmd == "reference":
         run_reference(args.case, args.final_time, args.frame_interval, raw, args.thinning,
-                      args.contact_from)
+                      args.contact_from, args.dt, args.prescribe_twist)
         out.parent.mkdir(parents=True, exist_ok=True)
         reduce_reference(args.case, raw, out, args.sample)
     elif args.cmd == "reduce":
