@@ -195,6 +195,7 @@ twist-into-writhe: $(STAMP)  ## steps of twist into writhe, rodphase vs PyElasti
 	$(BIN)/python studies/twist_into_writhe.py table solenoid
 	$(BIN)/python studies/twist_into_writhe.py table plectoneme
 	$(BIN)/python studies/twist_into_writhe.py fig4a
+	$(BIN)/python studies/twist_into_writhe.py fig2
 
 # dt 1e-4 s (4x the example's, half rodphase's bound): the twist prescribed at the example's
 # as-run rate, the kick scaled to its force; the plain SolenoidsCase at that dt checks the step
@@ -203,6 +204,8 @@ twist-into-writhe-references: bench-extra  ## its PyElastica runs into tests/dat
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 $(AS_RUN)
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --dt 1e-4 --contact-from 45 --sample 0.1
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_dt1e-4.npz -o tests/data/crosscheck_solenoid_dt1e-4.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_rodphase_law.npz -o tests/data/crosscheck_solenoid_rodphase_law.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_split.npz -o tests/data/crosscheck_solenoid_split.npz
 
 straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/performance.md)
 	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/performance.md

@@ -110,7 +110,8 @@ def settings(case: str) -> dict:
 
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path,
                   thinning: float = 0.0, contact_from: float = 0.0,
-                  dt_override: float | None = None, prescribe_twist: float | None = None) -> None:
+                  dt_override: float | None = None, prescribe_twist: float | None = None,
+                  contact_split: bool = False) -> None:
     """The case in PyElastica 1.0; `thinning` 1.0 adds rodphase's thinning force to the
     self-contact (studies/pyelastica_thinning.py), 0.0 is the example's RodSelfContact.
     `contact_from` > 0 skips the contact loop while the rod is straight (its force is then
@@ -128,6 +129,7 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
     c = settings(case)
     c["thinning"] = thinning
     c["contact_from"] = contact_from
+    c["contact_split"] = contact_split
     if final_time is not None:
         c["final_time_requested"] = c["final_time"]
         c["final_time"] = float(final_time)
@@ -220,14 +222,15 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
         sim.add_forcing_to(rod).using(ea.EndpointForces, np.zeros(3), c["force"] * y,
                                       ramp_up_time=t0 - 1)
     contact_holder = {}
-    if thinning or contact_from > 0:
+    if thinning or contact_from > 0 or contact_split:
         class Gated(thinning_self_contact()):  # keeps a handle on the instance PyElastica makes
             def __init__(self, *a, **kw):
                 super().__init__(*a, **kw)
                 contact_holder["contact"] = self
 
         sim.detect_contact_between(rod, rod).using(Gated, k=CONTACT_K, nu=CONTACT_NU,
-                                                   thinning=thinning, active_from=contact_from)
+                                                   thinning=thinning, active_from=contact_from,
+                                                   split=contact_split)
     else:
         sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=CONTACT_K, nu=CONTACT_NU)
 
@@ -366,13 +369,14 @@ def _closest(x, e, i, j):
             if d < best:
                 s = ps
                 t = 1.0
+    # and the closest points' places along segment i (t) and segment j (s), in [0, 1]
     return (x20 + s * e20 - x10 - t * e10, x21 + s * e21 - x11 - t * e11,
-            x22 + s * e22 - x12 - t * e12)
+            x22 + s * e22 - x12 - t * e12, t, s)
 
 
 @njit(cache=True)
 def self_contact_with_thinning(x, radius, length, tangent, velocity, external_forces,
-                               contact_k, contact_nu, thinning):
+                               contact_k, contact_nu, thinning, split=False):
     """PyElastica's self-contact force plus `thinning` × k·γ·a/(2l) along each touching
     element (x: the n element start points (3, n); velocity, external_forces (3, n+1)).
     With thinning 0 its forces equal PyElastica's bit for bit (tests/test_crosscheck_pyelastica.py)."""
@@ -391,7 +395,7 @@ def self_contact_with_thinning(x, radius, length, tangent, velocity, external_fo
                 total += dk * dk
             if np.sqrt(total) >= radii_sum + length_sum:
                 continue
-            d0, d1, d2 = _closest(x, edge, i, j)
+            d0, d1, d2, ti, sj = _closest(x, edge, i, j)
             distance = np.sqrt(0.0 + d0 * d0 + d1 * d1 + d2 * d2)
             d0 /= distance
             d1 /= distance
@@ -409,7 +413,23 @@ def self_contact_with_thinning(x, radius, length, tangent, velocity, external_fo
             net0 = scale * d0
             net1 = scale * d1
             net2 = scale * d2
-            if i == n - 1:
+            if split:
+                # rodphase's split: the pair's force (2 net per element) at the closest points,
+                # (1 − t, t) between each element's nodes, so that the spring is the gradient
+                # of ½kγ² in the node positions (PyElastica's equal split is not)
+                external_forces[0, i] -= 2.0 * (1.0 - ti) * net0
+                external_forces[1, i] -= 2.0 * (1.0 - ti) * net1
+                external_forces[2, i] -= 2.0 * (1.0 - ti) * net2
+                external_forces[0, i + 1] -= 2.0 * ti * net0
+                external_forces[1, i + 1] -= 2.0 * ti * net1
+                external_forces[2, i + 1] -= 2.0 * ti * net2
+                external_forces[0, j] += 2.0 * (1.0 - sj) * net0
+                external_forces[1, j] += 2.0 * (1.0 - sj) * net1
+                external_forces[2, j] += 2.0 * (1.0 - sj) * net2
+                external_forces[0, j + 1] += 2.0 * sj * net0
+                external_forces[1, j + 1] += 2.0 * sj * net1
+                external_forces[2, j + 1] += 2.0 * sj * net2
+            elif i == n - 1:
                 external_forces[0, i] -= net0 * 4 / 3
                 external_forces[1, i] -= net1 * 4 / 3
                 external_forces[2, i] -= net2 * 4 / 3
@@ -423,7 +443,9 @@ def self_contact_with_thinning(x, radius, length, tangent, velocity, external_fo
                 external_forces[0, i + 1] -= net0
                 external_forces[1, i + 1] -= net1
                 external_forces[2, i + 1] -= net2
-            if j == 0:
+            if split:
+                pass
+            elif j == 0:
                 external_forces[0, j] += net0 * 2 / 3
                 external_forces[1, j] += net1 * 2 / 3
                 external_forces[2, j] += net2 * 2 / 3
@@ -459,7 +481,7 @@ def pairs_within_reach(x, radius, length, tangent, margin):
     for i in range(n):
         skip = int(1 + np.ceil(0.8 * np.pi * radius[i] / length[i]))
         for j in range(i - skip, -1, -1):
-            d0, d1, d2 = _closest(x, edge, i, j)
+            d0, d1, d2, _, _ = _closest(x, edge, i, j)
             if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) < radius[i] + radius[j] + margin:
                 count += 1
     return count
@@ -479,9 +501,11 @@ def thinning_self_contact():
     import elastica as ea
 
     class ThinningSelfContact(ea.RodSelfContact):
-        def __init__(self, k: float, nu: float, thinning: float = 1.0, active_from: float = 0.0) -> None:
+        def __init__(self, k: float, nu: float, thinning: float = 1.0, active_from: float = 0.0,
+                     split: bool = False) -> None:
             super().__init__(k, nu)
             self.thinning = float(thinning)
+            self.split = bool(split)
             self.active_from = float(active_from)
             self.checked = active_from <= 0.0
             self.pairs_at_switch_on = None
@@ -499,7 +523,7 @@ def thinning_self_contact():
             self_contact_with_thinning(
                 system_one.position_collection[..., :-1], system_one.radius, system_one.lengths,
                 system_one.tangents, system_one.velocity_collection, system_one.external_forces,
-                self.k, self.nu, self.thinning)
+                self.k, self.nu, self.thinning, self.split)
 
     return ThinningSelfContact
 
@@ -1160,6 +1184,9 @@ def main(argv=None) -> int:
                    help="s; replaces the example's step (the kick is scaled to the same force)")
     a.add_argument("--prescribe-twist", type=float, default=None, metavar="FACTOR",
                    help="turn the end frame at FACTOR x the nominal rate (the SolenoidsCase as run: 0.8279066)")
+    a.add_argument("--contact-split", action="store_true",
+                   help="the pair force at the closest points, (1-t, t) per element, as rodphase's "
+                        "(PyElastica: half on each node)")
     a.add_argument("--contact-from", type=float, default=0.0,
                    help="s; skip the contact loop before it (the straight rod touches nowhere)")
     a.add_argument("--raw", type=Path, default=None)
@@ -1229,7 +1256,7 @@ def main(argv=None) -> int:
     out = args.out or DATA / f"crosscheck_{tag}.npz"
     if args.cmd == "reference":
         run_reference(args.case, args.final_time, args.frame_interval, raw, args.thinning,
-                      args.contact_from, args.dt, args.prescribe_twist)
+                      args.contact_from, args.dt, args.prescribe_twist, args.contact_split)
         out.parent.mkdir(parents=True, exist_ok=True)
         reduce_reference(args.case, raw, out, args.sample)
     elif args.cmd == "reduce":

@@ -46,6 +46,8 @@ ROWS = {
         ("mapped", "the example's settings mapped (the cross-check's run)", {}),
         ("no_thinning", "thinning force off (`contact.thinning_force=false`)",
          {"extra_sets": [("contact.thinning_force", False)]}),
+        ("no_thinning_dt", "thinning force off, at the example's dt (2.5e-5 s)",
+         {"extra_sets": [("contact.thinning_force", False)], "dt": "example"}),
         ("no_fold", "fold contact off (`contact.fold=false`)",
          {"extra_sets": [("contact.fold", False)]}),
         ("clamp_pyelastica", "clamp as PyElastica's (rigid end elements: n−2 elements, L−2l)",
@@ -77,7 +79,10 @@ FINAL_TIME = {"solenoid": 85.0, "plectoneme": 60.0}  # the shape is settled by t
 REFERENCES = {
     "solenoid": [("PyElastica 1.0", "crosscheck_solenoid.npz"),
                  ("PyElastica 1.0, dt 1e-4 s, twist prescribed as run", "crosscheck_solenoid_dt1e-4.npz"),
-                 ("PyElastica 1.0 + thinning force (dt 1e-4 s, as run)", "crosscheck_solenoid_thinning.npz")],
+                 ("PyElastica 1.0 + thinning force (dt 1e-4 s, as run)", "crosscheck_solenoid_thinning.npz"),
+                 ("PyElastica 1.0 + closest-point split (dt 1e-4 s, as run)", "crosscheck_solenoid_split.npz"),
+                 ("PyElastica 1.0 with rodphase's contact law: split + thinning (dt 1e-4 s, as run)",
+                  "crosscheck_solenoid_rodphase_law.npz")],
     "plectoneme": [("PyElastica 1.0", "crosscheck_plectoneme.npz")],
 }
 
@@ -90,7 +95,7 @@ def run_row(case: str, name: str, out: Path = OUT, final_time: float | None = No
     options = dict(next(o for n, _, o in ROWS[case] if n == name))
     out.mkdir(parents=True, exist_ok=True)
     return X.run_rodphase(
-        case, contact="example", dt="auto", twist="as-run", kick=options.pop("kick", "load"),
+        case, contact="example", dt=options.pop("dt", "auto"), twist="as-run", kick=options.pop("kick", "load"),
         rotation_damping=options.pop("rotation_damping", "example"), out=row_path(case, name, out),
         bodies=options.pop("bodies", "none"), kick_scale=options.pop("kick_scale", 1.0),
         final_time=final_time or FINAL_TIME[case], **options)
@@ -185,10 +190,47 @@ def figure(case: str, found: dict, png: Path) -> None:
     plt.close(fig)
 
 
+# ------------------------------------------------------------------ Fig 2a, 2b: rodphase's own scenes
+
+FIG2 = {"fig2a": "fig2a_plectoneme", "fig2b": "fig2b_solenoid"}
+
+
+def run_fig2(name: str) -> Path:
+    """rodphase's shipped Fig 2 scene: Φa (rest) and Wr over its twist ramp."""
+    from rodphase import config as C
+    from rodphase.analysis import stage_rows
+    from rodphase.analysis import twist_density
+    from rodphase.runner import run_scene
+    from rodphase.scenes import SCENES
+
+    r = run_scene(C.load_scene(FIG2[name], [], SCENES))
+    rows = stage_rows(r, "twist")
+    path = OUT / f"{name}_rodphase.npz"
+    OUT.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, phi=twist_density(r)[rows], writhe=r.history["writhe"][rows],
+                        info=json.dumps({"status": r.status, "scene": FIG2[name]}))
+    return path
+
+
+def fig2_steps(name: str) -> list[dict]:
+    """Steps of Wr(Φa) in rodphase's Fig 2 scene, Φa resampled every 0.1 turn of twist
+    (the cross-check's 0.5 s at 0.2 turns/s), as for the PyElastica cases."""
+    from rodphase import units
+    from rodphase.analysis import writhe_steps
+
+    r = np.load(OUT / f"{name}_rodphase.npz")
+    dphi = 0.1 * units.TURN * X.BASE_RADIUS / X.BASE_LENGTH  # Φa of 0.1 turn: 0.0157
+    grid = np.arange(r["phi"][0], r["phi"][-1], dphi)
+    return writhe_steps(grid, np.interp(grid, r["phi"], r["writhe"]))
+
+
 # ------------------------------------------------------------------ Fig 4a: the pull
 
 FIG4A_TURNS = {"13.0": 2.042, "10.2": 1.6}  # turns -> loading.twist_density of solenoid_loss
-DU_SAMPLE = 0.0025  # m of ΔU between writhe samples: 0.5 s of the 5 mm/s pull, as STEP_SAMPLE
+# m of ΔU between writhe samples (2 s of the 5 mm/s pull): a turn comes off over 20–40 mm of ΔU,
+# so finer samples split it into rises under the 0.3-turn threshold (at 2.5 mm: no step found
+# in rodphase's 10.2-turn pull, at 5 mm one of its two, at 10 mm both, measured)
+DU_SAMPLE = 0.01
 FORCE_WINDOW = 0.01  # m of ΔU: the force is a 10 mm running mean before its drops are found
 FORCE_DROP = 1.0  # F_C: a drop of the smoothed force counts when deeper (studies/figures.py)
 
@@ -317,7 +359,17 @@ def main(argv=None) -> int:
     f = sub.add_parser("fig4a", help="the pulled solenoid: rodphase's runs (if missing) and the figure")
     f.add_argument("--run", action="store_true", help="run rodphase's 13- and 10.2-turn pulls again")
     f.add_argument("--png", type=Path, default=None)
+    g = sub.add_parser("fig2", help="steps of Wr(Φa) in rodphase's Fig 2a and 2b scenes")
+    g.add_argument("--run", action="store_true", help="run the scenes again")
     args = ap.parse_args(argv)
+    if args.cmd == "fig2":
+        for name in FIG2:
+            if args.run or not (OUT / f"{name}_rodphase.npz").exists():
+                run_fig2(name)
+            steps = fig2_steps(name)
+            print(f"{name} ({FIG2[name]}): {len(steps)} steps: " + ", ".join(
+                f"+{st['gain']:.2f} to {st['to_value']:.2f} @ Φa {st['at']:.3f}" for st in steps))
+        return 0
     if args.cmd == "fig4a":
         for turns in FIG4A_TURNS:
             if args.run or not (OUT / f"fig4a_rodphase_{turns}.npz").exists():

@@ -100,3 +100,51 @@ def test_thinning_term_is_internal_and_lengthens_the_touching_elements():
     assert np.allclose(extra.sum(axis=1), 0.0, atol=1e-9)  # no net force
     # its power on the element lengths, Σ (f_{i+1} − f_i)·t_i, is positive: it stretches them
     assert np.sum((extra[:, 1:] - extra[:, :-1]) * tangents) > 0
+
+
+def _contact_energy(cc, x, volume):
+    """Σ ½ k γ² over PyElastica's pairs, the radii thinned from the element lengths."""
+    edges = np.diff(x, axis=1)
+    lengths = np.linalg.norm(edges, axis=0)
+    radius = np.sqrt(volume / lengths / np.pi)
+    n = len(lengths)
+    energy = 0.0
+    for i in range(n):
+        skip = int(1 + np.ceil(0.8 * np.pi * radius[i] / lengths[i]))
+        for j in range(i - skip, -1, -1):
+            d = cc._closest(x[:, :-1], edges, i, j)[:3]
+            gamma = radius[i] + radius[j] - np.linalg.norm(d)
+            if gamma > 0:
+                energy += 0.5 * 1e4 * gamma**2
+    return energy
+
+
+def test_split_and_thinning_make_the_spring_the_gradient_of_the_contact_energy():
+    # rodphase's contact law: closest-point split + thinning = −∂(Σ ½kγ²)/∂x; PyElastica's
+    # equal split without thinning is not (that is what the SolenoidsCase rows compare)
+    import crosscheck_pyelastica as cc
+
+    rng = np.random.default_rng(1)
+    x, radius, lengths, tangents, _ = _contact_state("solenoid", rng, 0.0)
+    volume = np.pi * 0.025**2 / (x.shape[1] - 1)
+    still = np.zeros_like(x)
+    forces = {}
+    for name, thinning, split in (("rodphase", 1.0, True), ("pyelastica", 0.0, False)):
+        f = np.zeros_like(x)
+        cc.self_contact_with_thinning(x[:, :-1], radius, lengths, tangents, still, f, 1e4, 0.0,
+                                      thinning, split)
+        forces[name] = f
+    touched = np.argsort(-np.linalg.norm(forces["rodphase"], axis=0))[:6]
+    h = 1e-7
+    errors = {"rodphase": 0.0, "pyelastica": 0.0}
+    for node in touched:
+        for k in range(3):
+            up, down = x.copy(), x.copy()
+            up[k, node] += h
+            down[k, node] -= h
+            grad = (_contact_energy(cc, up, volume) - _contact_energy(cc, down, volume)) / (2 * h)
+            for name in errors:
+                errors[name] = max(errors[name], abs(forces[name][k, node] + grad))
+    scale = np.abs(forces["rodphase"][:, touched]).max()
+    assert errors["rodphase"] < 1e-4 * scale
+    assert errors["pyelastica"] > 0.05 * scale
