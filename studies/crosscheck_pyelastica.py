@@ -111,7 +111,7 @@ def settings(case: str) -> dict:
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path,
                   thinning: float = 0.0, contact_from: float = 0.0,
                   dt_override: float | None = None, prescribe_twist: float | None = None,
-                  contact_split: bool = False) -> None:
+                  contact_split: bool = False, turns: float | None = None) -> None:
     """The case in PyElastica 1.0; `thinning` 1.0 adds rodphase's thinning force to the
     self-contact (studies/pyelastica_thinning.py), 0.0 is the example's RodSelfContact.
     `contact_from` > 0 skips the contact loop while the rod is straight (its force is then
@@ -130,6 +130,10 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
     c["thinning"] = thinning
     c["contact_from"] = contact_from
     c["contact_split"] = contact_split
+    if turns is not None:  # at the same rate: the twist takes 5 s per turn, as the example's
+        c["turns"] = float(turns)
+        c["time_twist"] = 5.0 * float(turns)
+        c["final_time"] = c["time_start_twist"] + c["time_twist"] + c["time_relax"] + c["time_pull"]
     if final_time is not None:
         c["final_time_requested"] = c["final_time"]
         c["final_time"] = float(final_time)
@@ -1184,6 +1188,8 @@ def main(argv=None) -> int:
                    help="s; replaces the example's step (the kick is scaled to the same force)")
     a.add_argument("--prescribe-twist", type=float, default=None, metavar="FACTOR",
                    help="turn the end frame at FACTOR x the nominal rate (the SolenoidsCase as run: 0.8279066)")
+    a.add_argument("--turns", type=float, default=None,
+                   help="turns put in instead of the case's, at its 0.2 turns/s (Fig 4a at 10.2 turns)")
     a.add_argument("--contact-split", action="store_true",
                    help="the pair force at the closest points, (1-t, t) per element, as rodphase's "
                         "(PyElastica: half on each node)")
@@ -1256,7 +1262,7 @@ def main(argv=None) -> int:
     out = args.out or DATA / f"crosscheck_{tag}.npz"
     if args.cmd == "reference":
         run_reference(args.case, args.final_time, args.frame_interval, raw, args.thinning,
-                      args.contact_from, args.dt, args.prescribe_twist, args.contact_split)
+                      args.contact_from, args.dt, args.prescribe_twist, args.contact_split, args.turns)
         out.parent.mkdir(parents=True, exist_ok=True)
         reduce_reference(args.case, raw, out, args.sample)
     elif args.cmd == "reduce":

@@ -128,9 +128,16 @@ def measure(path: Path, case: str) -> dict:
     ts, ws = resampled(t, wr)
     during = ts <= twist_end + 1.0
     steps = writhe_steps(ts[during], ws[during]) if during.sum() >= 3 else []  # a smoke test's moment
+    link = r["link"]
+    # a loop slipping over a bare clamp takes 2 turns of link in one sample (docs/reproduction.md)
+    escapes = int(np.sum(np.diff(link) < -1.0))
+    status = info.get("status", "ok")
+    if status != "ok":
+        status = f"unstable at {t[-1]:.1f} s"
     return {"onset": X.onset(t, wr), "steps": steps, "final_writhe": float(wr[-1]),
-            "final_end": float(end[-1]), "time": t, "writhe": wr,
-            "phase": info.get("phase", ""), "status": info.get("status", "ok")}
+            "escapes": escapes, "end_time": float(t[-1]),
+            "final_end": float(end[-1]), "time": t, "writhe": wr, "end": end,
+            "phase": info.get("phase", ""), "status": status}
 
 
 def step_text(m: dict) -> str:
@@ -141,9 +148,9 @@ def step_text(m: dict) -> str:
 
 def table(case: str, out: Path = OUT) -> tuple[str, dict]:
     """Markdown table of the rows, PyElastica's first, and the measurements by row name."""
-    lines = ["| code / change | onset [s] | steps | Wr after each step (turns @ s) | final Wr | "
-             "end height [m] | Δ final Wr vs PyElastica | Δ end vs PyElastica |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| code / change | status | link escapes | onset [s] | steps | Wr after each step (turns @ s) | "
+             "final Wr | end height [m] | Δ final Wr vs PyElastica | Δ end vs PyElastica |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     found = {}
     base = None
     for label, file in REFERENCES[case]:
@@ -158,35 +165,53 @@ def table(case: str, out: Path = OUT) -> tuple[str, dict]:
     for label, m in found.items():
         dw = f"{100 * (m['final_writhe'] / base['final_writhe'] - 1):+.0f} %" if base else "–"
         de = f"{100 * (m['final_end'] / base['final_end'] - 1):+.0f} %" if base else "–"
-        lines.append(f"| {label} | {m['onset']:.1f} | {len(m['steps'])} | {step_text(m)} | "
+        lines.append(f"| {label} | {m['status']} | {m['escapes']} | {m['onset']:.1f} | {len(m['steps'])} | {step_text(m)} | "
                      f"{m['final_writhe']:.2f} | {m['final_end']:.3f} | {dw} | {de} |")
     return "\n".join(lines), found
 
 
+FIGURE_ROWS = ("mapped", "no_thinning", "clamp_pyelastica", "pyelastica_like", "damping_x2")
+REFERENCE_STYLES = [dict(lw=2.8, color="k"), dict(lw=1.6, color="0.55", ls="--"),
+                    dict(lw=1.6, color="0.35", ls=":"), dict(lw=1.6, color="0.7", ls="-."),
+                    dict(lw=2.2, color="m", ls="--")]
+
+
 def figure(case: str, found: dict, png: Path) -> None:
+    """Wr(t) and the free end's height, PyElastica's runs in black and grey, rodphase's in colour
+    (the rows of FIGURE_ROWS; the table has them all)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     c = X.settings(case)
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    labels = {label: name for name, label, _ in ROWS[case]}
+    fig, (axw, axe) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    refs = iter(REFERENCE_STYLES)
     for label, m in found.items():
-        style = dict(lw=2.5, color="k") if label == "PyElastica 1.0" else dict(lw=1.2)
-        if "PyElastica" in label and label != "PyElastica 1.0":
-            style = dict(lw=2.0, color="0.5", ls="--")
-        ax.plot(m["time"], m["writhe"], label=label, **style)
-    start = c["time_start_twist"] + c["time_twist"] * 0.7
-    ax.set_xlim(start, c["time_start_twist"] + c["time_twist"] + 5)
-    ax.set_xlabel("t [s] (twist at 0.2 turns/s nominal until "
-                  f"{c['time_start_twist'] + c['time_twist']:.0f} s)")
-    ax.set_ylabel("Wr [turns]")
-    ax.set_title(f"{case.capitalize()}sCase: writhe, PyElastica 1.0 and rodphase, one change at a time")
-    ax.legend(fontsize=7, loc="upper left")
-    ax.grid(alpha=0.3)
+        name = labels.get(label.removeprefix("rodphase: "))
+        if label.startswith("rodphase: "):
+            if name not in FIGURE_ROWS:
+                continue
+            style = dict(lw=1.3)
+        else:
+            style = next(refs)
+        tag = "" if m["status"] == "ok" else f" [{m['status']}]"
+        axw.plot(m["time"], m["writhe"], label=label + tag, **style)
+        axe.plot(m["time"], m["end"], **style)
+    start = c["time_start_twist"] + c["time_twist"] * 0.75
+    axe.set_xlim(start, c["time_start_twist"] + c["time_twist"] + 8)
+    axe.set_xlabel("t [s] (twist ends at "
+                   f"{c['time_start_twist'] + c['time_twist']:.0f} s, then the end is clamped)")
+    axw.set_ylabel("Wr [turns]")
+    axe.set_ylabel("free end's height [m]")
+    axw.set_title(f"{case.capitalize()}sCase: PyElastica 1.0 (black, grey) and rodphase (colour)")
+    axw.legend(fontsize=6.5, loc="upper left")
+    for ax in (axw, axe):
+        ax.grid(alpha=0.3)
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
+    fig.savefig(png, dpi=100)
     plt.close(fig)
 
 
@@ -267,7 +292,7 @@ def fig4a_pyelastica(path: Path) -> dict:
     node's internal force minus the contact force on it, i.e. −(internal + external − 300 N)
     along the axis, the 300 N of EndpointForces counted as the puller's."""
     r = np.load(path)
-    c = X.settings("solenoid_pull")
+    c = json.loads(str(r["info"]))["settings"]  # the run's own (its turns may differ)
     t_pull = c["time_start_twist"] + c["time_twist"] + c["time_relax"]
     t = r["force_time"]
     pull = t >= t_pull
@@ -278,7 +303,8 @@ def fig4a_pyelastica(path: Path) -> dict:
     tw = r["time"] >= t_pull
     du_w = np.interp(r["time"][tw], t, y) - y[pull][0]
     return {"du": du, "force": force[pull] / fc, "du_writhe": du_w, "writhe": r["writhe"][tw],
-            "final_time": float(t[-1]), "complete": bool(t[-1] >= c["final_time"] - 0.1)}
+            "final_time": float(t[-1]),
+            "complete": bool(t[-1] >= c.get("final_time_requested", c["final_time"]) - 0.1)}
 
 
 
@@ -308,6 +334,12 @@ def fig4a(png: Path) -> str:
         pe = fig4a_pyelastica(ref)
         tag = "" if pe["complete"] else f" (to ΔU {pe['du'][-1]:.2f} m)"
         runs[f"PyElastica 1.0, example's settings, 13 turns{tag}"] = (
+            pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
+    ref10 = DATA / "crosscheck_solenoid_pull_10.npz"
+    if ref10.exists():
+        pe = fig4a_pyelastica(ref10)
+        tag = "" if pe["complete"] else f" (to ΔU {pe['du'][-1]:.2f} m)"
+        runs[f"PyElastica 1.0, example's settings, 10.2 turns{tag}"] = (
             pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
     for turns in FIG4A_TURNS:
         p = OUT / f"fig4a_rodphase_{turns}.npz"
