@@ -192,10 +192,10 @@ crosscheck-reference: bench-extra  ## rerun example CASE in PyElastica 1.0 into 
 twist-into-writhe: $(STAMP)  ## steps of twist into writhe, rodphase vs PyElastica one change at a time, and Fig 4a in both (docs/explanation/twist-into-writhe.md; ~30 min)
 	$(BIN)/python studies/twist_into_writhe.py rows solenoid
 	$(BIN)/python studies/twist_into_writhe.py rows plectoneme
-	$(BIN)/python studies/twist_into_writhe.py table solenoid
-	$(BIN)/python studies/twist_into_writhe.py table plectoneme
-	$(BIN)/python studies/twist_into_writhe.py fig4a
-	$(BIN)/python studies/twist_into_writhe.py fig2
+	$(BIN)/python studies/twist_into_writhe.py table solenoid --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py table plectoneme --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py fig4a --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py fig2 --write docs/explanation/twist-into-writhe.md
 
 # dt 1e-4 s (4x the example's, half rodphase's bound): the twist prescribed at the example's
 # as-run rate, the kick scaled to its force; the plain SolenoidsCase at that dt checks the step

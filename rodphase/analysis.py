@@ -299,9 +299,10 @@ def writhe_steps(x, y, min_step: float = STEP_MIN, contrast: float = STEP_CONTRA
     slower stretch inside) is one. `direction` −1 counts steps of loss (Fig 4a's writhe under
     the pull).
 
-    Returns, per step: "from", "to" (x where it starts and ends), "at" (the middle of its
-    fastest interval), "gain" (turns, > 0 for either direction), "to_value" (y at its end)
-    and "rows" (the first and last sample of it).
+    Returns, per step: "from", "to" (x where it starts and ends: the bounding minima), "at"
+    (the middle of its fastest interval), "gain" (turns, > 0 for either direction: the change
+    between the bounding minima, so it includes any slower growth up to the next minimum),
+    "to_value" (y at its end) and "rows" (the first and last sample of it).
     """
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)

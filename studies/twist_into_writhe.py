@@ -29,6 +29,8 @@ if __name__ == "__main__":
 
 import numpy as np
 
+from rodphase.studytools import write_block
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import crosscheck_pyelastica as X  # noqa: E402
 
@@ -36,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
 IMG = ROOT / "docs" / "img"
 OUT = ROOT / "out" / "twist_into_writhe"
+PAGE = ROOT / "docs" / "explanation" / "twist-into-writhe.md"
 
 STEP_SAMPLE = 0.5  # s: the references' sampling; rodphase's 0.1-s rows are resampled to it
 
@@ -388,25 +391,37 @@ def main(argv=None) -> int:
     b.add_argument("case", choices=sorted(ROWS))
     b.add_argument("--png", type=Path, default=None)
     b.add_argument("--out", type=Path, default=OUT, help="directory of the rows' records")
+    b.add_argument("--write", type=Path, default=None, help=f"write the table into its block of this page ({PAGE.relative_to(ROOT)})")
     f = sub.add_parser("fig4a", help="the pulled solenoid: rodphase's runs (if missing) and the figure")
     f.add_argument("--run", action="store_true", help="run rodphase's 13- and 10.2-turn pulls again")
     f.add_argument("--png", type=Path, default=None)
+    f.add_argument("--write", type=Path, default=None, help="write the table into its block of this page")
     g = sub.add_parser("fig2", help="steps of Wr(Φa) in rodphase's Fig 2a and 2b scenes")
     g.add_argument("--run", action="store_true", help="run the scenes again")
+    g.add_argument("--write", type=Path, default=None, help="write the counts into their block of this page")
     args = ap.parse_args(argv)
     if args.cmd == "fig2":
+        lines = ["| figure | rodphase scene | steps ≥ 0.3 turns | rise, Wr after it, Φa (rest) |",
+                 "|---|---|---|---|"]
         for name in FIG2:
             if args.run or not (OUT / f"{name}_rodphase.npz").exists():
                 run_fig2(name)
             steps = fig2_steps(name)
-            print(f"{name} ({FIG2[name]}): {len(steps)} steps: " + ", ".join(
-                f"+{st['gain']:.2f} to {st['to_value']:.2f} @ Φa {st['at']:.3f}" for st in steps))
+            lines.append(f"| {name} | `{FIG2[name]}` | {len(steps)} | " + (", ".join(
+                f"+{st['gain']:.2f} to {st['to_value']:.2f} @ Φa {st['at']:.3f}" for st in steps) or "none")
+                + " |")
+        print("\n".join(lines))
+        if args.write:
+            write_block(args.write, "fig2-steps", "\n".join(lines))
         return 0
     if args.cmd == "fig4a":
         for turns in FIG4A_TURNS:
             if args.run or not (OUT / f"fig4a_rodphase_{turns}.npz").exists():
                 run_fig4a_rodphase(turns)
-        print(fig4a(args.png or IMG / "twist_into_writhe_fig4a.png"))
+        text = fig4a(args.png or IMG / "twist_into_writhe_fig4a.png")
+        print(text)
+        if args.write:
+            write_block(args.write, "fig4a-table", text)
         return 0
     if args.cmd == "rows":
         for name, label, _ in ROWS[args.case]:
@@ -421,6 +436,8 @@ def main(argv=None) -> int:
     if args.cmd == "table":
         text, found = table(args.case, args.out)
         print(text)
+        if args.write:
+            write_block(args.write, f"{args.case}-table", text)
         figure(args.case, found, args.png or IMG / f"twist_into_writhe_{args.case}.png")
         return 0
     return 0
