@@ -181,7 +181,8 @@ def table(case: str, out: Path = OUT) -> tuple[str, dict]:
     for label, m in found.items():
         dw = f"{100 * (m['final_writhe'] / base['final_writhe'] - 1):+.0f} %" if base else "–"
         de = f"{100 * (m['final_end'] / base['final_end'] - 1):+.0f} %" if base else "–"
-        lines.append(f"| {label} | {m['status']} | {m['escapes']} | {m['onset']:.1f} | {len(m['steps'])} | {step_text(m)} | "
+        onset = "none" if math.isnan(m["onset"]) else f"{m['onset']:.1f}"
+        lines.append(f"| {label} | {m['status']} | {m['escapes']} | {onset} | {len(m['steps'])} | {step_text(m)} | "
                      f"{m['final_writhe']:.2f} | {m['final_end']:.3f} | {dw} | {de} |")
     return "\n".join(lines), found
 

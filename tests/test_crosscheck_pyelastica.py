@@ -148,3 +148,45 @@ def test_split_and_thinning_make_the_spring_the_gradient_of_the_contact_energy()
     scale = np.abs(forces["rodphase"][:, touched]).max()
     assert errors["rodphase"] < 1e-4 * scale
     assert errors["pyelastica"] > 0.05 * scale
+
+
+# ------------------------------------------------- steps of twist into writhe (issue #49)
+
+
+def _steps_every_half_second(t, wr, until):
+    from rodphase.analysis import writhe_steps
+
+    grid = np.arange(np.ceil(t[0] / 0.5) * 0.5, until + 1e-9, 0.5)
+    return writhe_steps(grid, np.interp(grid, t, wr))
+
+
+def test_solenoid_steps_in_both_codes(runs):
+    # docs/explanation/twist-into-writhe.md: four steps in each; rodphase's first is two loops
+    # (1.33 turns) where PyElastica's is one (0.73), and rodphase ends a loop's worth higher
+    ref, result = runs
+    theirs = _steps_every_half_second(ref["time"], ref["writhe"], 76.0)
+    assert len(theirs) == 4
+    assert theirs[0]["gain"] == pytest.approx(0.73, abs=0.1)
+    h = result.history
+    ours = _steps_every_half_second(h["time"], h["writhe"], 76.0)
+    assert len(ours) == 4
+    assert ours[0]["gain"] > 1.1
+    assert 3.2 < h["writhe"][-1] < 3.7 and 2.4 < ref["writhe"][-1] < 2.7
+
+
+def test_pulled_solenoid_reference_has_a_sawtooth_after_losing_link():
+    # Fig 4a through PyElastica (13 turns nominal, example's settings): two turns of link lost
+    # around the bare start clamp during the twist, then force drops each with a writhe step
+    tiw_path = ROOT / "studies" / "twist_into_writhe.py"
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("tiw_for_test", tiw_path)
+    tiw = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tiw)
+    ref = np.load(ROOT / "tests" / "data" / "crosscheck_solenoid_pull.npz")
+    t, link = ref["time"], ref["link"]
+    assert np.interp(85.0, t, link) == pytest.approx(11.0, abs=0.01)  # 13 put in, 2 escaped
+    pe = tiw.fig4a_pyelastica(ROOT / "tests" / "data" / "crosscheck_solenoid_pull.npz")
+    m = tiw.fig4a_measure(pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
+    assert len(m["drops"]) >= 2 and len(m["losses"]) >= 2
+    assert m["writhe_start"] == pytest.approx(2.55, abs=0.05)
