@@ -206,7 +206,7 @@ twist-into-writhe-references: bench-extra  ## its PyElastica runs into tests/dat
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_dt1e-4.npz -o tests/data/crosscheck_solenoid_dt1e-4.npz
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_rodphase_law.npz -o tests/data/crosscheck_solenoid_rodphase_law.npz
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --turns 10.19 --dt 1e-4 --contact-from 40 --sample 0.1 --raw /tmp/crosscheck_raw_solenoid_pull_10.npz -o tests/data/crosscheck_solenoid_pull_10.npz
-	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_split.npz -o tests/data/crosscheck_solenoid_split.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split --final-time 85 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_rodphase_law_dt_example.npz -o tests/data/crosscheck_solenoid_rodphase_law_dt_example.npz
 
 straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/performance.md)
 	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/performance.md

@@ -93,9 +93,10 @@ REFERENCES = {
     "solenoid": [("PyElastica 1.0", "crosscheck_solenoid.npz"),
                  ("PyElastica 1.0, dt 1e-4 s, twist prescribed as run", "crosscheck_solenoid_dt1e-4.npz"),
                  ("PyElastica 1.0 + thinning force (dt 1e-4 s, as run)", "crosscheck_solenoid_thinning.npz"),
-                 ("PyElastica 1.0 + closest-point split (dt 1e-4 s, as run)", "crosscheck_solenoid_split.npz"),
                  ("PyElastica 1.0 with rodphase's contact law: split + thinning (dt 1e-4 s, as run)",
-                  "crosscheck_solenoid_rodphase_law.npz")],
+                  "crosscheck_solenoid_rodphase_law.npz"),
+                 ("PyElastica 1.0 with rodphase's contact law, the example's dt and twist",
+                  "crosscheck_solenoid_rodphase_law_dt_example.npz")],
     "plectoneme": [("PyElastica 1.0", "crosscheck_plectoneme.npz")],
 }
 
@@ -268,13 +269,24 @@ def fig2_steps(name: str) -> list[dict]:
 
 # ------------------------------------------------------------------ Fig 4a: the pull
 
-FIG4A_TURNS = {"13.0": 2.042, "10.2": 1.6}  # turns -> loading.twist_density of solenoid_loss
+# run name -> the solenoid_loss scene's --set keys: the paper's 13 turns, the scene's 10.2, and 13
+# with nothing beyond the clamps, as PyElastica's example (a loop can slip over a bare clamp)
+FIG4A_RUNS = {
+    "13.0": [("loading.twist_density", 2.042)],
+    "10.2": [("loading.twist_density", 1.6)],
+    "13.0, bare clamps": [("loading.twist_density", 2.042), ("ends.start_body", "none"),
+                          ("ends.end_body", "none")],
+}
 # m of ΔU between writhe samples (2 s of the 5 mm/s pull): a turn comes off over 20–40 mm of ΔU,
 # so finer samples split it into rises under the 0.3-turn threshold (at 2.5 mm: no step found
 # in rodphase's 10.2-turn pull, at 5 mm one of its two, at 10 mm both, measured)
 DU_SAMPLE = 0.01
 FORCE_WINDOW = 0.01  # m of ΔU: the force is a 10 mm running mean before its drops are found
 FORCE_DROP = 1.0  # F_C: a drop of the smoothed force counts when deeper (studies/figures.py)
+
+
+def fig4a_path(turns: str) -> Path:
+    return OUT / f"fig4a_rodphase_{turns.replace(', ', '_').replace(' ', '_')}.npz"
 
 
 def run_fig4a_rodphase(turns: str) -> Path:
@@ -285,17 +297,18 @@ def run_fig4a_rodphase(turns: str) -> Path:
     from rodphase.scenes import SCENES
     from rodphase.studytools import machine
 
-    cfg = C.load_scene("solenoid_loss", [("loading.twist_density", FIG4A_TURNS[turns])], SCENES)
+    cfg = C.load_scene("solenoid_loss", FIG4A_RUNS[turns], SCENES)
     r = run_scene(cfg)
     h = r.history
     rows = np.where(stage_rows(r, "pull"))[0]
     fc = C.buckling_force(cfg)
-    path = OUT / f"fig4a_rodphase_{turns}.npz"
+    path = fig4a_path(turns)
     OUT.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
         path, du=h["end_displacement"][rows] - h["end_displacement"][rows[0]],
-        force=h["end_force"][rows] / fc, writhe=h["writhe"][rows],
-        info=json.dumps({"status": r.status, "turns": turns, "twist_density": FIG4A_TURNS[turns],
+        force=h["end_force"][rows] / fc, writhe=h["writhe"][rows], link=h["link"],
+        link_time=h["time"], pull_start=h["time"][rows[0]],
+        info=json.dumps({"status": r.status, "turns": turns, "sets": FIG4A_RUNS[turns],
                          "F_C": fc, "wall_time": r.diagnostics["wall_time"], "machine": machine()},
                         default=str))
     print(f"fig4a rodphase {turns} turns: {r.status}, wall {r.diagnostics['wall_time']:.0f} s -> {path}")
@@ -320,6 +333,7 @@ def fig4a_pyelastica(path: Path) -> dict:
     tw = r["time"] >= t_pull
     du_w = np.interp(r["time"][tw], t, y) - y[pull][0]
     return {"du": du, "force": force[pull] / fc, "du_writhe": du_w, "writhe": r["writhe"][tw],
+            "link_start": float(np.interp(t_pull, r["time"], r["link"])), "turns": float(c["turns"]),
             "final_time": float(t[-1]),
             "complete": bool(t[-1] >= c.get("final_time_requested", c["final_time"]) - 0.1)}
 
@@ -351,22 +365,26 @@ def fig4a(png: Path) -> str:
         pe = fig4a_pyelastica(ref)
         tag = "" if pe["complete"] else f" (to ΔU {pe['du'][-1]:.2f} m)"
         runs[f"PyElastica 1.0, example's settings, 13 turns{tag}"] = (
-            pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
+            pe["du"], pe["force"], pe["du_writhe"], pe["writhe"], pe["link_start"])
     ref10 = DATA / "crosscheck_solenoid_pull_10.npz"
     if ref10.exists():
         pe = fig4a_pyelastica(ref10)
         tag = "" if pe["complete"] else f" (to ΔU {pe['du'][-1]:.2f} m)"
         runs[f"PyElastica 1.0, example's settings, 10.2 turns{tag}"] = (
-            pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
-    for turns in FIG4A_TURNS:
-        p = OUT / f"fig4a_rodphase_{turns}.npz"
+            pe["du"], pe["force"], pe["du_writhe"], pe["writhe"], pe["link_start"])
+    for turns in FIG4A_RUNS:
+        p = fig4a_path(turns)
         if p.exists():
             r = np.load(p)
-            runs[f"rodphase solenoid_loss, {turns} turns"] = (r["du"], r["force"], r["du"], r["writhe"])
+            count, *rest = turns.split(", ")
+            label = ", ".join([f"rodphase solenoid_loss, {count} turns"] + rest)
+            link = float(np.interp(r["pull_start"], r["link_time"], r["link"])) if "link" in r.files else math.nan
+            runs[label] = (r["du"], r["force"], r["du"], r["writhe"], link)
     fig, (axf, axw) = plt.subplots(2, 1, figsize=(7.5, 7), sharex=True)
-    lines = ["| run | force drops > 1 F_C (F_C @ ΔU m) | writhe-loss steps ≥ 0.3 turns (turns @ ΔU m) | "
-             "Wr start → end | F start → end (F_C, 10 mm mean) |", "|---|---|---|---|---|"]
-    for label, (du, f, du_w, w) in runs.items():
+    lines = ["| run | Lk at the pull's start | force drops > 1 F_C (F_C @ ΔU m) | "
+             "writhe-loss steps ≥ 0.3 turns (turns @ ΔU m) | Wr start → end | F start → end (F_C, 10 mm mean) |",
+             "|---|---|---|---|---|---|"]
+    for label, (du, f, du_w, w, link) in runs.items():
         m = fig4a_measure(du, f, du_w, w)
         base, = axf.plot(du, m["smoothed"], lw=1.5, label=label)
         axf.plot(du, f, lw=0.4, alpha=0.35, color=base.get_color())
@@ -376,7 +394,7 @@ def fig4a(png: Path) -> str:
         axw.plot(du_w, w, lw=1.5, color=base.get_color(), label=label)
         drops = ", ".join(f"{d['peak_y'] - d['bottom_y']:.1f} @ {d['peak_x']:.3f}" for d in m["drops"]) or "none"
         losses = ", ".join(f"{s['gain']:.2f} @ {s['at']:.3f}" for s in m["losses"]) or "none"
-        lines.append(f"| {label} | {len(m['drops'])}: {drops} | {len(m['losses'])}: {losses} | "
+        lines.append(f"| {label} | {link:.2f} | {len(m['drops'])}: {drops} | {len(m['losses'])}: {losses} | "
                      f"{m['writhe_start']:.2f} → {m['writhe_end']:.2f} | "
                      f"{m['smoothed'][0]:.1f} → {m['smoothed'][-1]:.1f} |")
     axf.set_ylabel("end force F/F_C (thin: raw; thick: 10 mm mean)")
@@ -429,8 +447,8 @@ def main(argv=None) -> int:
             write_block(args.write, "fig2-steps", "\n".join(lines))
         return 0
     if args.cmd == "fig4a":
-        for turns in FIG4A_TURNS:
-            if args.run or not (OUT / f"fig4a_rodphase_{turns}.npz").exists():
+        for turns in FIG4A_RUNS:
+            if args.run or not fig4a_path(turns).exists():
                 run_fig4a_rodphase(turns)
         text = fig4a(args.png or IMG / "twist_into_writhe_fig4a.png")
         print(text)
