@@ -188,6 +188,7 @@ def table(case: str, out: Path = OUT) -> tuple[str, dict]:
     return "\n".join(lines), found
 
 
+FIGURE_TIMES = {"solenoid": (59.0, 83.0), "plectoneme": (5.0, 50.0)}  # s: where the loops form
 FIGURE_ROWS = ("mapped", "no_thinning", "clamp_pyelastica", "pyelastica_like", "damping_x2")
 REFERENCE_STYLES = [dict(lw=2.8, color="k"), dict(lw=1.6, color="0.55", ls="--"),
                     dict(lw=1.6, color="0.35", ls=":"), dict(lw=1.6, color="0.7", ls="-."),
@@ -217,8 +218,7 @@ def figure(case: str, found: dict, png: Path) -> None:
         tag = "" if m["status"] == "ok" else f" [{m['status']}]"
         axw.plot(m["time"], m["writhe"], label=label + tag, **style)
         axe.plot(m["time"], m["end"], **style)
-    start = c["time_start_twist"] + c["time_twist"] * 0.75
-    axe.set_xlim(start, c["time_start_twist"] + c["time_twist"] + 8)
+    axe.set_xlim(*FIGURE_TIMES[case])
     axe.set_xlabel("t [s] (twist ends at "
                    f"{c['time_start_twist'] + c['time_twist']:.0f} s, then the end is clamped)")
     axw.set_ylabel("Wr [turns]")
