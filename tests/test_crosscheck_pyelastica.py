@@ -190,3 +190,18 @@ def test_pulled_solenoid_reference_has_a_sawtooth_after_losing_link():
     m = tiw.fig4a_measure(pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
     assert len(m["drops"]) >= 2 and len(m["losses"]) >= 2
     assert m["writhe_start"] == pytest.approx(2.55, abs=0.05)
+
+
+def test_pulled_solenoid_reference_at_the_scenes_twist_has_a_sawtooth_too():
+    # Fig 4a ships at 10.2 turns because both codes show the sawtooth there: PyElastica keeps
+    # its link through the twist, then loses coils in steps under the pull
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("tiw_for_test10", ROOT / "studies" / "twist_into_writhe.py")
+    tiw = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tiw)
+    path = ROOT / "tests" / "data" / "crosscheck_solenoid_pull_10.npz"
+    pe = tiw.fig4a_pyelastica(path)
+    assert pe["complete"] and pe["link_start"] == pytest.approx(10.19, abs=0.01)
+    m = tiw.fig4a_measure(pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
+    assert len(m["losses"]) >= 2 and len(m["drops"]) >= 2
