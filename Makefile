@@ -206,6 +206,7 @@ twist-into-writhe-references: bench-extra  ## its PyElastica runs into tests/dat
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_dt1e-4.npz -o tests/data/crosscheck_solenoid_dt1e-4.npz
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_rodphase_law.npz -o tests/data/crosscheck_solenoid_rodphase_law.npz
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --turns 10.19 --dt 1e-4 --contact-from 40 --sample 0.1 --raw /tmp/crosscheck_raw_solenoid_pull_10.npz -o tests/data/crosscheck_solenoid_pull_10.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --kick-shape uniform --dt 1e-4 --prescribe-twist 0.8279066 --final-time 72 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_uniform_kick.npz -o tests/data/crosscheck_solenoid_uniform_kick.npz
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split --final-time 85 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_rodphase_law_dt_example.npz -o tests/data/crosscheck_solenoid_rodphase_law_dt_example.npz
 
 straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/performance.md)

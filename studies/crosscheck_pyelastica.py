@@ -111,7 +111,8 @@ def settings(case: str) -> dict:
 def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path,
                   thinning: float = 0.0, contact_from: float = 0.0,
                   dt_override: float | None = None, prescribe_twist: float | None = None,
-                  contact_split: bool = False, turns: float | None = None) -> None:
+                  contact_split: bool = False, turns: float | None = None,
+                  kick_shape: str = "point") -> None:
     """The case in PyElastica 1.0; `thinning` 1.0 adds rodphase's thinning force to the
     self-contact (studies/pyelastica_thinning.py), 0.0 is the example's RodSelfContact.
     `contact_from` > 0 skips the contact loop while the rod is straight (its force is then
@@ -140,6 +141,10 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
     n = c["n_elem"]
     dt = c["dt"]  # the example steps with final_time / total_steps (of its full run)
     kick = KICK
+    # rodphase's stand-in for the point kick (build_problem): a uniform lateral acceleration
+    # with the same first-mode projection, (π/2)·F/M, F = m_node·KICK/dt the point force
+    uniform_kick = (math.pi / 2) * (MASS / c["n_elem"] * KICK / dt) / MASS
+    c["kick_shape"] = kick_shape
     if dt_override is not None:
         kick = KICK * dt_override / dt
         dt = c["dt"] = float(dt_override)
@@ -218,7 +223,10 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
                 system.velocity_collection[0, -1] = 0.0
                 system.velocity_collection[2, -1] = 0.0
                 system.omega_collection[..., -1] = -self.ang_vel
-                system.velocity_collection[2, system.n_elems // 2] -= kick
+                if kick_shape == "uniform":
+                    system.velocity_collection[2, 1:-1] -= uniform_kick * dt
+                else:
+                    system.velocity_collection[2, system.n_elems // 2] -= kick
 
     sim.constrain(rod).using(TwistEnd, constrained_position_idx=(0, -1),
                              constrained_director_idx=(0, -1))
@@ -1188,6 +1196,8 @@ def main(argv=None) -> int:
                    help="s; replaces the example's step (the kick is scaled to the same force)")
     a.add_argument("--prescribe-twist", type=float, default=None, metavar="FACTOR",
                    help="turn the end frame at FACTOR x the nominal rate (the SolenoidsCase as run: 0.8279066)")
+    a.add_argument("--kick-shape", choices=("point", "uniform"), default="point",
+                   help="point: the example's mid-node kick; uniform: rodphase's stand-in for it")
     a.add_argument("--turns", type=float, default=None,
                    help="turns put in instead of the case's, at its 0.2 turns/s (Fig 4a at 10.2 turns)")
     a.add_argument("--contact-split", action="store_true",
@@ -1262,7 +1272,8 @@ def main(argv=None) -> int:
     out = args.out or DATA / f"crosscheck_{tag}.npz"
     if args.cmd == "reference":
         run_reference(args.case, args.final_time, args.frame_interval, raw, args.thinning,
-                      args.contact_from, args.dt, args.prescribe_twist, args.contact_split, args.turns)
+                      args.contact_from, args.dt, args.prescribe_twist, args.contact_split, args.turns,
+                      args.kick_shape)
         out.parent.mkdir(parents=True, exist_ok=True)
         reduce_reference(args.case, raw, out, args.sample)
     elif args.cmd == "reduce":

@@ -96,7 +96,9 @@ REFERENCES = {
                  ("PyElastica 1.0 with rodphase's contact law: split + thinning (dt 1e-4 s, as run)",
                   "crosscheck_solenoid_rodphase_law.npz"),
                  ("PyElastica 1.0 with rodphase's contact law, the example's dt and twist",
-                  "crosscheck_solenoid_rodphase_law_dt_example.npz")],
+                  "crosscheck_solenoid_rodphase_law_dt_example.npz"),
+                 ("PyElastica 1.0, rodphase's uniform stand-in for the kick (dt 1e-4 s, to 72 s)",
+                  "crosscheck_solenoid_uniform_kick.npz")],
     "plectoneme": [("PyElastica 1.0", "crosscheck_plectoneme.npz")],
 }
 
