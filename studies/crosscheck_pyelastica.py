@@ -83,6 +83,13 @@ CASES = {
         n_elem=100, force=300.0, initial_kick=False,
         prescribed_twist=True, pull_distance=0.4, pull_rate=0.005,
     ),
+    # the same at rodphase's Fig 4a twist, Φa = 1.6: 10.19 turns (rodphase's side of
+    # `reference solenoid_pull --turns 10.19`)
+    "solenoid_pull_10": dict(
+        turns=10.19, time_start_twist=10.0, time_twist=5.0 * 10.19, time_relax=10.0,
+        n_elem=100, force=300.0, initial_kick=False,
+        prescribed_twist=True, pull_distance=0.4, pull_rate=0.005,
+    ),
 }
 
 
@@ -712,6 +719,12 @@ def build_problem(case: str, sets, twist: str, kick: str, kick_scale: float = 1.
                      controls=Controls(end_force=constant(force), end_rotation=table, gravity=g)),
                Stage(c["time_relax"], label="relax", ends=clamped,
                      controls=Controls(end_force=constant(force), end_rotation=constant(final)))]
+    if c["pull_distance"] > 0:
+        # Fig 4a (case solenoid_pull): the end pulled at a steady rate, its frame held; the
+        # stage holds the end where it finds it, and its reaction is the history's end_force
+        stages.append(Stage(c["time_pull"], label="pull", ends=clamped, controls=Controls(
+            end_rotation=constant(final),
+            end_displacement=ramp(0, c["time_pull"], 0, c["pull_distance"]))))
     problem.stages = tuple(stages)
     problem.ends = sliding
     return problem
@@ -790,7 +803,8 @@ def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotati
         out, time=h["time"], end_rotation=h["end_rotation"], link=lk, twist=tw, writhe=wr,
         link_rodphase=h.get("link", np.zeros(0)), twist_rodphase=h.get("twist", np.zeros(0)),
         writhe_rodphase=h.get("writhe", np.zeros(0)), contacts=h["contacts"],
-        penetration=h["penetration"], kinetic=h["kinetic_energy"],
+        penetration=h["penetration"], kinetic=h["kinetic_energy"], end_force=h["end_force"],
+        end_displacement=h["end_displacement"], stage=h["stage"],
         end_position=to_pyelastica(X[:, -1]) if len(X) else np.zeros((0, 3)),
         final_positions=to_pyelastica(result.positions),
         final_d1=to_pyelastica(result.directors[:, 0]), info=json.dumps(info, default=str))

@@ -341,6 +341,23 @@ def fig4a_pyelastica(path: Path) -> dict:
 
 
 
+def fig4a_rodphase_example(path: Path) -> dict:
+    """ΔU, F/F_C and Wr of the pull in rodphase run with the example's settings (the
+    crosscheck's `rodphase solenoid_pull --twist nominal`): the reaction of the held end is the
+    history's end_force, the writhe the reference's estimator on 0.1-s snapshots."""
+    r = np.load(path)
+    info = json.loads(str(r["info"]))
+    labels = [s["label"] for s in info.get("stages", [])] if "stages" in info else None
+    pull = r["stage"] == (max(r["stage"]) if labels is None else labels.index("pull"))
+    t = r["time"]
+    fc = math.pi**2 * X.E * math.pi * X.BASE_RADIUS**4 / 4 / X.BASE_LENGTH**2
+    u = r["end_displacement"][pull] - r["end_displacement"][pull][0]
+    t0 = t[pull][0]
+    return {"du": u, "force": r["end_force"][pull] / fc,
+            "writhe": np.interp(t[pull], t, r["writhe"]),
+            "link_start": float(np.interp(t0, t, r["link"]))}
+
+
 def fig4a_measure(du, force, du_w, writhe) -> dict:
     from rodphase.analysis import sawtooth_drops, smooth, writhe_steps
 
@@ -374,6 +391,12 @@ def fig4a(png: Path) -> str:
         tag = "" if pe["complete"] else f" (to ΔU {pe['du'][-1]:.2f} m)"
         runs[f"PyElastica 1.0, example's settings, 10.2 turns{tag}"] = (
             pe["du"], pe["force"], pe["du_writhe"], pe["writhe"], pe["link_start"])
+    for turns, file in (("13", "fig4a_rodphase_example_13.npz"), ("10.19", "fig4a_rodphase_example_10.npz")):
+        p = OUT / file
+        if p.exists():
+            rp = fig4a_rodphase_example(p)
+            runs[f"rodphase, example's settings (as PyElastica's), {turns} turns"] = (
+                rp["du"], rp["force"], rp["du"], rp["writhe"], rp["link_start"])
     for turns in FIG4A_RUNS:
         p = fig4a_path(turns)
         if p.exists():
@@ -388,17 +411,19 @@ def fig4a(png: Path) -> str:
              "|---|---|---|---|---|---|"]
     for label, (du, f, du_w, w, link) in runs.items():
         m = fig4a_measure(du, f, du_w, w)
+        drops = ", ".join(f"{d['peak_y'] - d['bottom_y']:.1f} @ {d['peak_x']:.3f}" for d in m["drops"]) or "none"
+        losses = ", ".join(f"{s['gain']:.2f} @ {s['at']:.3f}" for s in m["losses"]) or "none"
+        lines.append(f"| {label} | {link:.2f} | {len(m['drops'])}: {drops} | {len(m['losses'])}: {losses} | "
+                     f"{m['writhe_start']:.2f} → {m['writhe_end']:.2f} | "
+                     f"{m['smoothed'][0]:.1f} → {m['smoothed'][-1]:.1f} |")
+        if label.startswith("rodphase solenoid_loss, 13.0"):
+            continue  # in the table; its line lies under the example-settings 13-turn one
         base, = axf.plot(du, m["smoothed"], lw=1.5, label=label)
         axf.plot(du, f, lw=0.4, alpha=0.35, color=base.get_color())
         for d in m["drops"]:
             axf.annotate("", (d["bottom_x"], d["bottom_y"]), (d["peak_x"], d["peak_y"]),
                          arrowprops={"arrowstyle": "->", "color": base.get_color(), "lw": 1.2})
         axw.plot(du_w, w, lw=1.5, color=base.get_color(), label=label)
-        drops = ", ".join(f"{d['peak_y'] - d['bottom_y']:.1f} @ {d['peak_x']:.3f}" for d in m["drops"]) or "none"
-        losses = ", ".join(f"{s['gain']:.2f} @ {s['at']:.3f}" for s in m["losses"]) or "none"
-        lines.append(f"| {label} | {link:.2f} | {len(m['drops'])}: {drops} | {len(m['losses'])}: {losses} | "
-                     f"{m['writhe_start']:.2f} → {m['writhe_end']:.2f} | "
-                     f"{m['smoothed'][0]:.1f} → {m['smoothed'][-1]:.1f} |")
     axf.set_ylabel("end force F/F_C (thin: raw; thick: 10 mm mean)")
     axw.set_ylabel("Wr [turns]")
     axw.set_xlabel("end displacement ΔU [m] (pulled at 5 mm/s, end rotation held)")
@@ -452,6 +477,12 @@ def main(argv=None) -> int:
         for turns in FIG4A_RUNS:
             if args.run or not fig4a_path(turns).exists():
                 run_fig4a_rodphase(turns)
+        for case, file in (("solenoid_pull", "fig4a_rodphase_example_13.npz"),
+                           ("solenoid_pull_10", "fig4a_rodphase_example_10.npz")):
+            if args.run or not (OUT / file).exists():
+                # the example's settings mapped, the 13 (10.19) turns put in as PyElastica's pull run
+                X.run_rodphase(case, contact="example", dt="auto", twist="nominal", kick="load",
+                               rotation_damping="example", out=OUT / file)
         text = fig4a(args.png or IMG / "twist_into_writhe_fig4a.png")
         print(text)
         if args.write:
