@@ -205,3 +205,26 @@ def test_pulled_solenoid_reference_at_the_scenes_twist_has_a_sawtooth_too():
     assert pe["complete"] and pe["link_start"] == pytest.approx(10.19, abs=0.01)
     m = tiw.fig4a_measure(pe["du"], pe["force"], pe["du_writhe"], pe["writhe"])
     assert len(m["losses"]) >= 2 and len(m["drops"]) >= 2
+
+
+@pytest.mark.parametrize("case, sawtooth", [("solenoid_pull_10", True), ("solenoid_pull", False)])
+def test_rodphase_on_the_pull_settings_has_the_sawtooth_at_10_turns_only(tmp_path, case, sawtooth):
+    # the shipped Fig 4a decision (docs/explanation/twist-into-writhe.md): on PyElastica's pull
+    # settings rodphase sheds coils in teeth at 10.19 turns and opens like a spring at 13
+    import importlib.util
+
+    import crosscheck_pyelastica as cc
+
+    spec = importlib.util.spec_from_file_location(f"tiw_{case}", ROOT / "studies" / "twist_into_writhe.py")
+    tiw = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tiw)
+    out = tmp_path / f"{case}.npz"
+    info = cc.run_rodphase(case, contact="example", dt="auto", twist="nominal", kick="load",
+                           rotation_damping="example", out=out)
+    assert info["status"] == "ok"
+    rp = tiw.fig4a_rodphase_example(out)
+    m = tiw.fig4a_measure(rp["du"], rp["force"], rp["du"], rp["writhe"])
+    if sawtooth:
+        assert len(m["drops"]) >= 2 and len(m["losses"]) >= 2
+    else:
+        assert m["drops"] == [] and m["losses"] == []
