@@ -17,6 +17,7 @@ Steps are counted by `rodphase.analysis.writhe_steps` on Wr resampled every
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -194,7 +195,8 @@ FIGURE_TIMES = {"solenoid": (59.0, 83.0), "plectoneme": (5.0, 50.0)}  # s: where
 FIGURE_ROWS = ("mapped", "no_thinning", "clamp_pyelastica", "pyelastica_like", "damping_x2")
 REFERENCE_STYLES = [dict(lw=2.8, color="k"), dict(lw=1.6, color="0.55", ls="--"),
                     dict(lw=1.6, color="0.35", ls=":"), dict(lw=1.6, color="0.7", ls="-."),
-                    dict(lw=2.2, color="m", ls="--")]
+                    dict(lw=2.0, color="0.45", ls="--"), dict(lw=1.4, color="0.25", ls=(0, (1, 3))),
+                    dict(lw=1.2, color="0.6", ls=(0, (5, 1, 1, 1)))]
 
 
 def figure(case: str, found: dict, png: Path) -> None:
@@ -208,7 +210,7 @@ def figure(case: str, found: dict, png: Path) -> None:
     c = X.settings(case)
     labels = {label: name for name, label, _ in ROWS[case]}
     fig, (axw, axe) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-    refs = iter(REFERENCE_STYLES)
+    refs = itertools.cycle(REFERENCE_STYLES)
     for label, m in found.items():
         name = labels.get(label.removeprefix("rodphase: "))
         if label.startswith("rodphase: "):
