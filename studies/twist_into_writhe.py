@@ -249,8 +249,7 @@ FIG2 = {"fig2a": "fig2a_plectoneme", "fig2b": "fig2b_solenoid"}
 def run_fig2(name: str) -> Path:
     """rodphase's shipped Fig 2 scene: Φa (rest) and Wr over its twist ramp."""
     from rodphase import config as C
-    from rodphase.analysis import stage_rows
-    from rodphase.analysis import twist_density
+    from rodphase.analysis import stage_rows, twist_density
     from rodphase.runner import run_scene
     from rodphase.scenes import SCENES
 
