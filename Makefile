@@ -125,7 +125,7 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 	ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
 	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
-	static-path hold-budget energy-audit
+	static-path hold-budget energy-audit twist-into-writhe twist-into-writhe-references
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -215,6 +215,26 @@ crosscheck: $(STAMP)  ## PyElastica's own example CASE (default solenoid) in rod
 
 crosscheck-reference: bench-extra  ## rerun example CASE in PyElastica 1.0 into tests/data (about an hour)
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference $(CASE)
+
+twist-into-writhe: $(STAMP)  ## steps of twist into writhe, rodphase vs PyElastica one change at a time, and Fig 4a in both (docs/explanation/twist-into-writhe.md; ~30 min)
+	$(BIN)/python studies/twist_into_writhe.py rows solenoid
+	$(BIN)/python studies/twist_into_writhe.py rows plectoneme
+	$(BIN)/python studies/twist_into_writhe.py table solenoid --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py table plectoneme --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py fig4a --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py fig2 --write docs/explanation/twist-into-writhe.md
+
+# dt 1e-4 s (4x the example's, half rodphase's bound): the twist prescribed at the example's
+# as-run rate, the kick scaled to its force; the plain SolenoidsCase at that dt checks the step
+AS_RUN = --dt 1e-4 --prescribe-twist 0.8279066 --final-time 85 --contact-from 50
+twist-into-writhe-references: bench-extra  ## its PyElastica runs into tests/data: SolenoidsCase + thinning, 13-turn solenoid pulled, SolenoidsCase at dt 1e-4 (~1 h CPU)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 $(AS_RUN)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --dt 1e-4 --contact-from 45 --sample 0.1
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_dt1e-4.npz -o tests/data/crosscheck_solenoid_dt1e-4.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_rodphase_law.npz -o tests/data/crosscheck_solenoid_rodphase_law.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --turns 10.19 --dt 1e-4 --contact-from 40 --sample 0.1 --raw /tmp/crosscheck_raw_solenoid_pull_10.npz -o tests/data/crosscheck_solenoid_pull_10.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --kick-shape uniform --dt 1e-4 --prescribe-twist 0.8279066 --final-time 72 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_uniform_kick.npz -o tests/data/crosscheck_solenoid_uniform_kick.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split --final-time 85 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_rodphase_law_dt_example.npz -o tests/data/crosscheck_solenoid_rodphase_law_dt_example.npz
 
 straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/history/performance.md)
 	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/history/performance.md
