@@ -366,7 +366,8 @@ def lines(onset: pd.DataFrame, levels: list[Level], settings: Settings) -> pd.Da
 def claims(table: pd.DataFrame, above: float = 1.1) -> dict:
     """The paper's two claims as numbers: the onset's slope and intercept at high extension
     (L/L0 > `above`) with their standard errors, and the extension from which solenoids win
-    (the lowest plectoneme–solenoid boundary point, ± its half bracket)."""
+    (the lowest plectoneme–solenoid boundary point whose bracket failed runs did not leave
+    wide, ± its half bracket)."""
     out: dict = {}
     onset = table[(table["kind"] == "onset") & (table["extension"] > above)
                   & table["twist_density"].notna()]
@@ -376,6 +377,9 @@ def claims(table: pd.DataFrame, above: float = 1.1) -> dict:
         out["onset_slope"], out["onset_intercept"] = float(slope), float(intercept)
         out["onset_slope_error"], out["onset_intercept_error"] = map(float, np.sqrt(np.diag(cov)))
     ps = table[table["kind"] == "plectoneme_solenoid"]
+    # a bracket left wide by failed runs (the model fails there) says nothing of where
+    # solenoids begin
+    ps = ps[ps["failed"].fillna(0) < MAX_FAILED]
     if len(ps):
         first = ps.loc[ps["extension"].idxmin()]
         out["solenoids_from"] = float(first["extension"])

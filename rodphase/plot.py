@@ -143,7 +143,11 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
                  f"holds ≤ {solver.get('hold_max_time', float('nan')):g} s to equilibrium "
                  f"(tolerance {solver.get('hold_tolerance', float('nan')):g}), "
                  f"damping {solver.get('damping', float('nan')):g}/s")
-    if sweep:
+    if sweep and sweep.get("sampler") == "boundaries":
+        bracket = sweep.get("boundary") or {}
+        parts.append(f"runs placed by bracketing (rodphase boundaries, tolerance "
+                     f"{bracket.get('tolerance', 0.005):g} in L/L0)")
+    elif sweep:
         parts.append(f"{sweep.get('samples', '?')} {sweep.get('sampler', '?')} samples, "
                      f"seed {sweep.get('seed', '?')}")
     if table is not None and "status" in table:
@@ -310,6 +314,16 @@ def boundary_lines(ax, lines: pd.DataFrame) -> list:
     the legend handles."""
     handles = []
     ps = lines[lines["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
+    # a bracket that failed runs left wide (the model fails there) is no point of the line
+    wide = ps["failed"].fillna(0) >= 3 if "failed" in ps else pd.Series(False, ps.index)
+    if wide.any():
+        handles.append(ax.errorbar(
+            ps.loc[wide, "extension"], ps.loc[wide, "twist_density"],
+            xerr=[ps.loc[wide, "extension"] - ps.loc[wide, "extension_low"],
+                  ps.loc[wide, "extension_high"] - ps.loc[wide, "extension"]],
+            fmt="none", ecolor=VERMILLION, elinewidth=1.0, capsize=3, ls=":", zorder=4,
+            label="bracket left wide (failed runs)"))
+    ps = ps[~wide]
     if len(ps):
         ax.fill_betweenx(ps["twist_density"], ps["extension_low"], ps["extension_high"],
                          color=VERMILLION, alpha=0.25, lw=0, zorder=1)
