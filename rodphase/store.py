@@ -1019,6 +1019,16 @@ def provenance() -> dict:
             "pandas": pd.__version__, "platform": platform.platform()}
 
 
+def _declares_store(path: Path) -> bool:
+    """Whether `path` is HDF5 with rodphase's format attribute (a store, if a damaged one:
+    --force may replace it; nothing else)."""
+    try:
+        with _h5(path, "r") as f:
+            return _plain(f.attrs.get("format")) == FORMAT
+    except (OSError, RuntimeError, ValueError, KeyError, TypeError, StoreError):
+        return False
+
+
 def _is_empty_hdf5(path: Path) -> bool:
     try:
         with _h5(path, "r") as f:
@@ -1054,6 +1064,12 @@ def open_store(path, *, config_text: str, config_hash: str, version: str, kind: 
                     held = existing.attrs.get("config_hash")
             except NotAStore as exc:
                 held, other = None, str(exc)
+            if other and not (_declares_store(path) or path.stat().st_size == 0):
+                # `-o typo.yaml`: advising --force (or obeying it) would put a store in place
+                # of the user's own file
+                raise NotAStore(other.split(": give a file")[0] + ": --force replaces only a "
+                                "rodphase store, and this file is not one; nothing was "
+                                "changed: give another output file (or move this one away)")
             if held != config_hash and not replace:
                 revision = (earlier or {}).get(held)
                 if revision is not None:
