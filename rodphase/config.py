@@ -457,9 +457,12 @@ AXES = {
 def _unknown(path: str, key: str, known, value) -> ConfigError:
     """A key that is not one of `known`: its path and the value given to it, and the keys
     allowed there (the nearest first, if one is near)."""
-    close = difflib.get_close_matches(key, list(known), n=1)
+    named = isinstance(key, str) and key.isprintable() and key.strip() and key == key.strip()
+    close = difflib.get_close_matches(key, list(known), n=1) if named else []
     hint = f"; did you mean '{close[0]}'?" if close else ""
-    return ConfigError(f"{path}{key}", value, "a known key, one of " + ", ".join(known) + hint)
+    # an empty, blank, multi-line or non-text key (`"": 1`, `null: 1`, `3: 1`): as written
+    return ConfigError(f"{path}{key if named else repr(key)}", value,
+                       "a known key, one of " + ", ".join(known) + hint)
 
 
 def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
@@ -470,10 +473,15 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
         if key not in SCENE_KEYS:
             raise _unknown("", key, SCENE_KEYS, raw[key])
     name = raw.get("scene")
-    if registered is not None and name not in registered:
+    # a list or a mapping is no scene name (and `in` a dict of names would raise TypeError)
+    if registered is not None and (not isinstance(name, str) or name not in registered):
         raise ConfigError("scene", name, "one of " + ", ".join(sorted(registered)))
-    out: dict[str, Any] = {"scene": text("scene", name),
-                           "description": raw.get("description", "")}
+    description = raw.get("description")
+    if description is not None and not isinstance(description, str):
+        # kept as given it would carry a NaN, a list or a mapping into the stored config
+        raise ConfigError("description", description, "text, a sentence saying what the "
+                          "scene is")
+    out: dict[str, Any] = {"scene": text("scene", name), "description": description or ""}
     if "initial_state" in raw:
         out["initial_state"] = initial_state("initial_state", raw["initial_state"])
     for section, fields in SCENE_SCHEMA.items():
@@ -720,7 +728,9 @@ def parse_override(item: str) -> tuple[str, Any]:
     try:
         parsed = _yaml(value)
     except yaml.YAMLError as exc:
-        raise ConfigError(key, value, f"a YAML value ({getattr(exc, 'problem', exc)})") from None
+        # a ReaderError (a control character) has no .problem and a two-line str: one line
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(key, value, f"a YAML value ({problem})") from None
     return key, parsed
 
 
