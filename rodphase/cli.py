@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -168,25 +169,36 @@ def run(scene, output, sets, force):
     cfg = checked_initial_state(load_scene(scene, _overrides(sets), SCENES))
     from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
+    from .sweep import Interrupted, interruptible, stop_on_signals
     from .tabulate import classify_store
 
     check_memory(cfg)  # a run whose snapshots cannot fit is refused before it costs anything
     make_output_folder(output)
+    existed = Path(output).exists()
     # the output is opened (locked, its config checked) before simulating: a run that cannot
-    # be written is refused before it costs anything
-    with open_store(output, config_text=to_yaml(scene=cfg), config_hash=config_hash(cfg),
-                    version=__version__, kind="run", replace=force,
-                    earlier=earlier_hashes(cfg)) as store:
-        from .runner import compile_kernel, cpu_seconds
+    # be written is refused before it costs anything. Ctrl-C and SIGTERM stop it as they stop
+    # a sweep (never inside the store's write), and say what was kept
+    with stop_on_signals() as stop:
+        try:
+            with open_store(output, config_text=to_yaml(scene=cfg),
+                            config_hash=config_hash(cfg), version=__version__, kind="run",
+                            replace=force, earlier=earlier_hashes(cfg)) as store:
+                from .runner import compile_kernel, cpu_seconds
 
-        click.echo("Compiling the kernel (once; numba caches it on disk) ...")
-        cpu = cpu_seconds()
-        wall = compile_kernel()  # kept out of the run's own timing
-        click.echo(f"  ready in {wall:.1f} s (CPU {cpu_seconds() - cpu:.1f} s)")
-        click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
-        result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
-        store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
-        table = classify_store(store)
+                click.echo("Compiling the kernel (once; numba caches it on disk) ...")
+                cpu = cpu_seconds()
+                with interruptible():
+                    wall = compile_kernel()  # kept out of the run's own timing
+                click.echo(f"  ready in {wall:.1f} s (CPU {cpu_seconds() - cpu:.1f} s)")
+                click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
+                started = time.perf_counter()
+                with interruptible():
+                    result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
+                store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
+                table = classify_store(store)
+        except Interrupted:
+            _stopped_run(output, existed, stop.signal_name,
+                         time.perf_counter() - started if "started" in locals() else None)
     d = result.diagnostics
     click.echo(f"{result.status}: {result.message}")
     if d.get("dt_asleep") is not None and d.get("contact_woke_at") is None:
@@ -208,6 +220,29 @@ def run(scene, output, sets, force):
     if escapes:
         click.echo(escapes)
     sys.exit(0 if result.ok else 1)
+
+
+def _stopped_run(output, existed: bool, signal_name: str, seconds: float | None) -> None:
+    """A run stopped by a signal: what was kept, how to go on; exit 128 + the signal's
+    number, as a stopped sweep. A run is stored whole or not at all, so a store that this
+    command made holds nothing and is removed."""
+    import signal
+
+    from .store import lock_path, parts_folder
+
+    when = "while compiling" if seconds is None else f"after {seconds:.1f} s of the run"
+    if existed:
+        kept = f"{output} is as it was"
+    else:
+        for leftover in (Path(output), lock_path(output)):
+            leftover.unlink(missing_ok=True)
+        if parts_folder(output).is_dir() and not any(parts_folder(output).iterdir()):
+            parts_folder(output).rmdir()
+        kept = f"{output}, made by this command, was removed"
+    click.echo(f"stopped by {signal_name} {when}: a run is stored only once it has finished, "
+               f"so nothing was stored ({kept}); run the same command to start it again.",
+               err=True)
+    sys.exit(128 + signal.Signals[signal_name].value)
 
 
 def _escapes_line(result) -> str:

@@ -566,6 +566,9 @@ class Store:
         self._need_writer()
         if not self._parts and not self._replace and self.file is not None:
             return
+        if (not self._parts and self._replace and self._path.exists()
+                and not _is_empty_hdf5(self._path)):
+            return  # another config's store goes when the first new run comes, not before
         parts = dict(self._parts)
         # a copied run takes about its part's size again (data and metadata); twice that
         # leaves room for HDF5's own bookkeeping

@@ -54,13 +54,85 @@ def test_force_still_replaces_a_store_of_another_config_or_an_empty_file(tmp_pat
         pass
     with pytest.raises(S.StoreMismatch, match="or --force to replace it"):
         S.open_store(target, config_text="b: 1\n", config_hash="mine", version="0", kind="run")
+    before = target.read_bytes()
     with S.open_store(target, config_text="b: 1\n", config_hash="mine", version="0", kind="run",
                       replace=True):
-        pass
+        pass  # no run: nothing replaced (as --help says, the first new run replaces it)
+    assert target.read_bytes() == before
     empty = tmp_path / "empty.h5"
     empty.touch()
-    with S.open_store(empty, config_text="b: 1\n", config_hash="mine", version="0", kind="run",
-                      replace=True):
-        pass
-    with S.read_store(empty) as store:
-        assert store.attrs["config_hash"] == "mine"
+    for path in (target, empty):
+        with S.open_store(path, config_text="b: 1\n", config_hash="mine", version="0",
+                          kind="run", replace=True) as store:
+            store.write_run("run", {}, _stored_run(), {})
+        with S.read_store(path) as store:
+            assert store.attrs["config_hash"] == "mine" and store.run_ids() == ["run"]
+
+
+# ---------------------------------------------------------------- Ctrl-C during `rodphase run`
+
+def _interrupted_run(monkeypatch, signum):
+    """`run_scene` that receives `signum` halfway, as Ctrl-C (or a batch system) sends it."""
+    import os
+    import time
+
+    from rodphase import runner
+
+    def run_scene(cfg):
+        os.kill(os.getpid(), signum)
+        time.sleep(5)  # the handler raises here, as between two stages of a real run
+        raise AssertionError("the signal did not stop the run")
+
+    monkeypatch.setattr(runner, "compile_kernel", lambda: 0.0)
+    monkeypatch.setattr(runner, "run_scene", run_scene)
+
+
+@pytest.mark.parametrize("signame, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_stopped_run_says_what_was_kept_exits_like_a_sweep_and_leaves_no_empty_store(
+        tmp_path, monkeypatch, signame, code):
+    """Ctrl-C printed "Aborted!", exited 1 and left an empty 6.6 kB store."""
+    import signal
+
+    _interrupted_run(monkeypatch, getattr(signal, signame))
+    out = cli("run", "twist_under_load", "-o", tmp_path / "run.h5", "--set", "rod.elements=20")
+    assert out.exit_code == code, (out.output, out.exception)
+    assert "Aborted!" not in out.output
+    assert f"stopped by {signame} after" in out.stderr
+    assert "nothing was stored" in out.stderr and "was removed" in out.stderr
+    assert "run the same command to start it again" in out.stderr
+    assert list(tmp_path.iterdir()) == []
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+def test_a_stopped_run_leaves_a_store_it_did_not_make_as_it_was(tmp_path, monkeypatch):
+    import signal
+
+    target = tmp_path / "old.h5"
+    with S.open_store(target, config_text="a: 1\n", config_hash="other", version="0",
+                      kind="run") as store:
+        store.write_run("run", {}, _stored_run(), {})
+    before = target.read_bytes()
+    _interrupted_run(monkeypatch, signal.SIGINT)
+    out = cli("run", "twist_under_load", "-o", target, "--force", "--set", "rod.elements=20")
+    assert out.exit_code == 130, out.output
+    assert f"{target} is as it was" in out.stderr
+    assert target.read_bytes() == before
+
+
+def _stored_run(status="ok", n=8, rows=4):
+    from rodphase.result import HISTORY_COLUMNS, RunResult
+
+    history = {name: np.zeros(rows) for name in HISTORY_COLUMNS}
+    history["time"] = np.linspace(0.0, 1.0, rows)
+    positions = np.zeros((n + 1, 3))
+    positions[:, 2] = np.linspace(0.0, 1.0, n + 1)
+    return RunResult(
+        status=status, message="completed" if status == "ok" else "unstable at t = 1 s",
+        positions=positions, directors=np.tile(np.eye(3), (n, 1, 1)), radii=np.full(n, 0.025),
+        rest_lengths=np.full(n, 1.0 / n), history=history,
+        snapshot_positions=positions[None].copy(), snapshot_d1=np.tile([1.0, 0, 0], (1, n, 1)),
+        snapshot_rows=np.array([rows - 1]),
+        diagnostics={"steps": 10, "wall_time": 0.1, "rest_radius": 0.025, "rest_length": 1.0,
+                     "youngs_modulus": 1e6, "elements": n, "notes": [],
+                     "stages": [{"label": "hold 0"}]},
+        stage_ends=[rows - 1])
