@@ -279,8 +279,8 @@ def _escapes_line(result) -> str:
               "in flight are sent again), or for a worker once every worker has left.")
 @click.option("--retry-failed", is_flag=True, help="Run again the runs that failed before.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
-@click.option("--quiet", is_flag=True, help="No progress bar (none either when stderr is not a "
-              "terminal).")
+@click.option("--quiet", is_flag=True, help="No progress bar (without a terminal: no progress "
+              "line every 30 s).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
 def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry_failed, sets,
@@ -317,7 +317,9 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
                            scheduler=scheduler, retry_failed=retry_failed, replace=force,
                            # a bar's carriage returns garble a log file (batch jobs, CI)
                            progress=not quiet and sys.stderr.isatty(), echo=click.echo,
-                           reconnect_timeout=patience)
+                           reconnect_timeout=patience,
+                           # without a terminal (nohup, CI), a line at a steady pace instead
+                           lines=None if quiet or sys.stderr.isatty() else click.echo)
     except ClusterLost as exc:
         import shlex
 

@@ -136,3 +136,53 @@ def _stored_run(status="ok", n=8, rows=4):
                      "youngs_modulus": 1e6, "elements": n, "notes": [],
                      "stages": [{"label": "hold 0"}]},
         stage_ends=[rows - 1])
+
+
+# ---------------------------------------------------------------- progress without a terminal
+
+def test_without_a_terminal_a_sweep_prints_progress_lines_at_a_steady_pace(tmp_path,
+                                                                          monkeypatch):
+    """Under nohup or in CI nothing was printed for minutes."""
+    import re
+
+    from test_sweep import _FakePool
+
+    from rodphase import sweep as sw
+
+    monkeypatch.setattr(sw, "PROGRESS_EVERY", 0.0)  # a line at every look at the workers
+    jobs = [sw.Job([f"run-{i:05d}"], [{"twist_density": i / 100}], {"rod": {"elements": 6}})
+            for i in range(12)]
+    report = sw.SweepReport(12, 0, 0, 0, 0.0, [])
+    said = []
+    with S.open_store(tmp_path / "o.h5", config_text="x", config_hash="h" * 16, version="t",
+                      kind="sweep") as store:
+        sw._run_jobs(store, jobs, _FakePool(), False, report, said.append)
+    assert said, "no progress line"
+    pattern = r"(\d+) of 12 runs finished \(0 failed\), \d+ s elapsed(, about \d+ s left)?"
+    for line in said:
+        assert re.fullmatch(pattern, line), line
+    assert re.fullmatch(pattern, said[-1]).group(1) == "12"
+    monkeypatch.setattr(sw, "PROGRESS_EVERY", 3600.0)
+    quiet = []
+    sw._run_jobs(store, [], _FakePool(), False, sw.SweepReport(0, 0, 0, 0, 0.0, []),
+                 quiet.append)
+    assert quiet == []
+    assert sw._duration(59.6) == "1 min 0 s" and sw._duration(3725) == "1 h 2 min"
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_the_cli_asks_for_lines_only_without_a_terminal_and_without_quiet(tmp_path, monkeypatch,
+                                                                         quiet):
+    from rodphase import sweep as sw
+
+    seen = {}
+
+    def run_sweep(*args, **kwargs):
+        seen.update(kwargs)
+        return sw.SweepReport(1, 0, 1, 0, 0.1, [])
+
+    monkeypatch.setattr(sw, "run_sweep", run_sweep)
+    out = cli("sweep", "quick", "-o", tmp_path / "q.h5", *(["--quiet"] if quiet else []))
+    assert out.exit_code == 0, out.output
+    assert seen["progress"] is False  # CliRunner's stderr is no terminal
+    assert (seen["lines"] is None) == quiet
