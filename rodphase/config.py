@@ -707,6 +707,8 @@ def stored_config(text: str) -> dict:
     """The resolved config a store carries (its config_yaml attribute), read with the same
     strict loader as config files (a file from elsewhere may hold an alias bomb); {} when it
     is not a YAML mapping."""
+    if not isinstance(text, str):
+        return {}  # an attribute of another type (a damaged file, another program's)
     try:
         data = _yaml(text or "")
     except yaml.YAMLError:

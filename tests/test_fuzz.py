@@ -406,6 +406,18 @@ def test_damaged_stores_are_read_or_refused_in_one_line(good_store, tmp_path_fac
     through_everything(path, folder, plot=data.draw(st.integers(0, 5), label="plot") == 0)
 
 
+def test_a_store_whose_config_attribute_is_not_text_still_draws(good_store, tmp_path):
+    """Found by the fuzzer: config_yaml holding a float ended `plot` in AttributeError."""
+    path = tmp_path / "s.h5"
+    shutil.copy(good_store, path)
+    with h5py.File(path, "r+") as f:
+        f.attrs["config_yaml"] = np.float64("nan")
+    out = CliRunner().invoke(main, ["plot", str(path), "--kind", "phase", "--no-theory", "-o",
+                                    str(tmp_path / "p.png")])
+    assert out.exit_code == 0, (out.output, out.exception)
+    assert C.stored_config(3.0) == {} and C.stored_config(None) == {}
+
+
 @pytest.mark.parametrize("damage", ["diagnostics NaN", "diagnostics dropped", "positions text",
                                     "history column dropped"])
 def test_a_damaged_run_is_one_error_line_naming_the_file_and_run(good_store, tmp_path, damage):
