@@ -339,14 +339,39 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     by_status = Counter(status for _, status, _ in report.failures)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(by_status.items())) or "0 failed"
     compiled = f" (+ {report.compile_time:.1f} s compiling)" if report.compile_time else ""
-    click.echo(f"{report.done} ok, {counts}, {report.skipped} skipped of {report.total} in "
-               f"{report.wall:.1f} s{compiled}; written to {output}")
-    for run_id, status, message in report.failures:
+    this_time = "this time: " if report.skipped else ""
+    click.echo(f"{this_time}{report.done} ok, {counts}, {report.skipped} skipped of "
+               f"{report.total} in {report.wall:.1f} s{compiled}; written to {output}")
+    failures = list(report.failures)
+    if report.skipped:
+        # a resumed sweep: the runs skipped count too (a failed one is skipped, not retried)
+        stored, earlier = _stored_summary(output, {rid for rid, _, _ in failures})
+        click.echo(stored)
+        failures += earlier
+        by_status.update(status for _, status, _ in earlier)
+    for run_id, status, message in failures:
         click.echo(f"  {run_id}: {status}: {message}")
     if by_status.get("not_converged"):
         click.echo("  (a not_converged run keeps its final shape: it is classified, and its "
                    "status says the hold ran out of time)")
-    sys.exit(0 if report.failed == 0 else 1)
+    if failures and report.skipped and not retry_failed:
+        click.echo("  (failed runs are kept and skipped; --retry-failed runs them again)")
+    sys.exit(0 if not failures else 1)
+
+
+def _stored_summary(output, listed: set[str]) -> tuple[str, list[tuple[str, str, str]]]:
+    """'OUT holds N runs: 39 ok, 1 unstable' and the failed runs stored before (those not in
+    `listed`), as (run id, status, message)."""
+    from .store import read_store
+
+    with read_store(output) as store:
+        table = store.table()
+    counts = Counter(table["status"]) if len(table) else Counter()
+    earlier = [(str(row.run_id), str(row.status), str(row.message).splitlines()[-1]
+                if str(row.message) else "") for row in table.itertuples()
+               if row.status != "ok" and str(row.run_id) not in listed]
+    text = ", ".join(f"{n} {status}" for status, n in sorted(counts.items())) or "no runs"
+    return f"{output} holds {len(table)} runs: {text}", earlier
 
 
 @main.command()

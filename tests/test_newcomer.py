@@ -186,3 +186,37 @@ def test_the_cli_asks_for_lines_only_without_a_terminal_and_without_quiet(tmp_pa
     assert out.exit_code == 0, out.output
     assert seen["progress"] is False  # CliRunner's stderr is no terminal
     assert (seen["lines"] is None) == quiet
+
+
+# ---------------------------------------------------------------- a resumed sweep's summary
+
+def test_a_resumed_sweep_summarises_the_whole_store(tmp_path, monkeypatch):
+    """A resumed sweep reported "38 ok, 0 failed, 2 skipped" although the store held an
+    unstable run."""
+    from rodphase import sweep as sw
+
+    out_path = tmp_path / "q.h5"
+
+    def run_sweep(sweep, scene, out, **kwargs):
+        with S.open_store(out, config_text="x", config_hash="h" * 16, version="t",
+                          kind="sweep") as store:
+            for i, status in enumerate(["ok", "unstable", "ok", "ok"]):
+                store.write_run(f"run-{i:05d}", {}, _stored_run(status), {})
+        return sw.SweepReport(4, 2, 2, 0, 0.1, [])  # the two of this time: ok
+
+    monkeypatch.setattr(sw, "run_sweep", run_sweep)
+    out = cli("sweep", "quick", "-o", out_path)
+    assert "this time: 2 ok, 0 failed, 2 skipped of 4" in out.stdout
+    assert f"{out_path} holds 4 runs: 3 ok, 1 unstable" in out.stdout
+    assert "  run-00001: unstable: unstable at t = 1 s" in out.stdout
+    assert "--retry-failed runs them again" in out.stdout
+    assert out.exit_code == 1  # some runs of the sweep failed, this time or before
+
+
+def test_a_fresh_sweep_summary_is_as_before(tmp_path, monkeypatch):
+    from rodphase import sweep as sw
+
+    monkeypatch.setattr(sw, "run_sweep", lambda *a, **k: sw.SweepReport(4, 0, 4, 0, 0.1, []))
+    out = cli("sweep", "quick", "-o", tmp_path / "q.h5")
+    assert out.exit_code == 0 and "this time" not in out.stdout and " holds " not in out.stdout
+    assert "4 ok, 0 failed, 0 skipped of 4 in 0.1 s" in out.stdout
