@@ -750,12 +750,41 @@ def config(name, sets):
         is_sweep = "sweep" in read_yaml(path)
     except ConfigError:
         is_sweep = False
+    overrides = _overrides(sets)
     if is_sweep:
-        sweep_cfg, scene_cfg = load_sweep(path, _overrides(sets), SCENES)
-        click.echo(to_yaml(sweep=sweep_cfg, scene=checked_initial_state(scene_cfg)), nl=False)
+        from .config import Frozen
+
+        sweep_cfg, scene_cfg = load_sweep(path, overrides, SCENES)
+        checked_initial_state(scene_cfg)
+        click.echo(_origins(sweep_cfg["set"], overrides), nl=False)
+        # a value of sweep.set that --set replaces is shown once, where it is in force
+        replaced = {k for k, _ in overrides if not k.startswith("sweep.")}
+        shown = Frozen({**sweep_cfg, "set": Frozen(
+            {k: v for k, v in sweep_cfg["set"].items() if k not in replaced})})
+        click.echo(to_yaml(sweep=shown, scene=scene_cfg), nl=False)
     else:
-        scene_cfg = checked_initial_state(load_scene(name, _overrides(sets), SCENES))
+        scene_cfg = checked_initial_state(load_scene(name, overrides, SCENES))
+        click.echo(_origins({}, overrides), nl=False)
         click.echo(to_yaml(scene=scene_cfg), nl=False)
+
+
+def _origins(sweep_set, overrides) -> str:
+    """YAML comments saying which scene values come from sweep.set and --set, rather than
+    from the scene file or the defaults ("" if none do)."""
+    lines = []
+    given = dict(overrides)
+    for key, value in sweep_set.items():
+        if key in given:
+            lines.append(f"#   {key}: {given[key]!r} from --set (replacing sweep.set's "
+                         f"{value!r})")
+        else:
+            lines.append(f"#   {key}: {value!r} from sweep.set")
+    lines += [f"#   {key}: {value!r} from --set" for key, value in given.items()
+              if key not in sweep_set]
+    if not lines:
+        return ""
+    return "# set on top of the config files (their other values are the files' or defaults):\n" + (
+        "\n".join(lines) + "\n")
 
 
 @main.command()

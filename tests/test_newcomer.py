@@ -220,3 +220,27 @@ def test_a_fresh_sweep_summary_is_as_before(tmp_path, monkeypatch):
     out = cli("sweep", "quick", "-o", tmp_path / "q.h5")
     assert out.exit_code == 0 and "this time" not in out.stdout and " holds " not in out.stdout
     assert "4 ok, 0 failed, 0 skipped of 4 in 0.1 s" in out.stdout
+
+
+# ---------------------------------------------------------------- the value in force, once
+
+def test_config_shows_a_value_set_twice_once_and_where_it_came_from():
+    """`rodphase config fig3_paper --set rod.elements=160` printed rod.elements: 80 under
+    sweep.set and elements: 160 in the scene."""
+    import yaml
+
+    out = cli("config", "fig3_paper", "--set", "rod.elements=160")
+    assert out.exit_code == 0, out.output
+    printed = yaml.safe_load(out.stdout)
+    assert "rod.elements" not in printed["sweep"]["set"]
+    assert printed["sweep"]["set"]["solver.refine_up_to"] == 160  # the others stay
+    assert printed["scene"]["rod"]["elements"] == 160
+    assert "#   rod.elements: 160 from --set (replacing sweep.set's 80)" in out.stdout
+    assert "#   solver.slow_down_to: 0.25 from sweep.set" in out.stdout
+    assert [ln for ln in out.stdout.splitlines() if "elements" in ln and "#" not in ln] == [
+        "    elements: 160"]
+    scene = cli("config", "twist_under_load", "--set", "rod.elements=60")
+    assert "#   rod.elements: 60 from --set" in scene.stdout
+    assert yaml.safe_load(scene.stdout)["scene"]["rod"]["elements"] == 60
+    plain = cli("config", "twist_under_load")
+    assert not plain.stdout.startswith("#")
