@@ -244,3 +244,24 @@ def test_config_shows_a_value_set_twice_once_and_where_it_came_from():
     assert yaml.safe_load(scene.stdout)["scene"]["rod"]["elements"] == 60
     plain = cli("config", "twist_under_load")
     assert not plain.stdout.startswith("#")
+
+
+# ---------------------------------------------------------------- a run's final values by name
+
+def test_a_runs_final_topology_and_end_loads_are_named_properties():
+    """They were reached by indexing history[...][-1]."""
+    import math
+
+    result = _stored_run(rows=5)
+    h = result.history
+    h["link"], h["twist"], h["writhe"] = (np.arange(5.0), 0.6 * np.arange(5.0),
+                                          0.4 * np.arange(5.0))
+    h["end_force"], h["end_torque"] = np.linspace(0, 2.5, 5), np.linspace(0, -1e-3, 5)
+    assert (result.link, result.twist, result.writhe) == (4.0, 2.4, 1.6)
+    assert result.end_force == 2.5 and result.end_torque == -1e-3
+    assert all(isinstance(v, float) for v in (result.link, result.end_force))
+    del h["link"]  # output.topology: false
+    assert math.isnan(result.link)
+    for name in ("link", "twist", "writhe", "end_force", "end_torque"):
+        doc = getattr(type(result), name).__doc__
+        assert ("[turns]" if name in ("link", "twist", "writhe") else "[N") in doc, name
