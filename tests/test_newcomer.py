@@ -265,3 +265,49 @@ def test_a_runs_final_topology_and_end_loads_are_named_properties():
     for name in ("link", "twist", "writhe", "end_force", "end_torque"):
         doc = getattr(type(result), name).__doc__
         assert ("[turns]" if name in ("link", "twist", "writhe") else "[N") in doc, name
+
+
+# ---------------------------------------------------------------- item 4: the axes agree
+
+def _sweep_file(tmp_path, axes: str):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(f"sweep:\n  scene: twist_under_load\n  axes: {axes}\n  samples: 4\n")
+    return path
+
+
+def test_an_extension_axis_past_what_the_twist_range_can_buckle_is_refused_saying_why(
+        tmp_path):
+    """The extension axis took L/L0 up to 2 while the twist density stops at 3, which the
+    straight rod's onset passes near L/L0 = 1.48: above it a sweep reached no buckled state
+    and said nothing about why."""
+    from rodphase import config as C
+    from rodphase.rod.model import Rod
+    from rodphase.scenes import SCENES
+    from rodphase.theory import sheared_greenhill_turns
+
+    line = one_error(cli("sweep", _sweep_file(tmp_path, "{twist_density: [0, 3], extension: "
+                                                        "[1.0, 2.0]}"), "-o", tmp_path / "o.h5"),
+                     "sweep.axes.extension: [1.0, 2.0]", "at most L/L0 = 1.48",
+                     "passes Phi*a = 3, the largest twist density allowed",
+                     "5.61 at L/L0 = 2", "no sample there could buckle",
+                     "past the onset above L/L0 ~ 1.4", "stops unstable")
+    assert not (tmp_path / "o.h5").exists(), line
+    # the bound is where the sheared clamped Greenhill twist of this rod is Phi*a = 3
+    rod = Rod(length=1.0, radius=0.025, elements=100, youngs_modulus=1e6)
+
+    def phi_c(e):
+        tension = rod.axial_stiffness * (1 - 1 / e)
+        turns = sheared_greenhill_turns(tension, e, rod.length, rod.bending_stiffness,
+                                        rod.twist_stiffness, rod.shear_stiffness)
+        return turns * 2 * np.pi * rod.radius / rod.length
+
+    assert phi_c(1.475) < 3.0 < phi_c(1.485)
+    C.load_sweep(_sweep_file(tmp_path, "{twist_density: [0, 3], extension: [1.0, 1.475]}"), [],
+                 SCENES)
+    with pytest.raises(C.ConfigError, match="at most L/L0 = 1.48"):
+        C.load_sweep(_sweep_file(tmp_path, "{twist_density: [0, 0.5], extension: [1.0, 1.49]}"),
+                     [], SCENES)  # whatever the twist axis: the range cannot reach it
+    # the stretched rod's own twist density reaches its onset (< 2) along the whole axis
+    C.load_sweep(_sweep_file(tmp_path, "{twist_density_current: [0, 3], extension: [1, 2]}"),
+                 [], SCENES)
+    assert phi_c(2.0) / 2.0**1.5 < 2.0
