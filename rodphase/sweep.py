@@ -966,6 +966,8 @@ def stop_on_signals() -> Iterator[_Stop]:
     finally:
         for s, old in previous.items():
             signal.signal(s, old)
+        # read inside the block; left set, a later _run_jobs of this process would stop at once
+        _stop.signal_name, _stop.interruptible = None, 0
 
 
 @contextmanager

@@ -386,7 +386,7 @@ def through_everything(path: Path, out: Path, plot: bool) -> None:
         pass
 
 
-@fuzz(max_examples=25)
+@fuzz(max_examples=20)
 @given(data=st.data())
 def test_damaged_stores_are_read_or_refused_in_one_line(good_store, tmp_path_factory, data):
     folder = tmp_path_factory.mktemp("damaged")
