@@ -485,7 +485,8 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
     if "initial_state" in raw:
         out["initial_state"] = initial_state("initial_state", raw["initial_state"])
     for section, fields in SCENE_SCHEMA.items():
-        given = raw.get(section) or {}
+        given = raw.get(section)
+        given = {} if given is None else given  # `rod:` alone; but not [], 0 or "" for one
         if not isinstance(given, dict):
             raise ConfigError(section, given, "a mapping of " + ", ".join(fields))
         values = {}
@@ -852,6 +853,8 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
         # the axis replaces whatever the scene said about the same control
         section = AXES[axis][1].split(".")[0]
         scene_raw.setdefault(section, {})
+        if not isinstance(scene_raw[section], dict):
+            continue  # --set loading=nan: validate_scene refuses it, naming the section
         for other in _axis_controls(axis):
             if other != AXES[axis][1]:
                 scene_raw[section].pop(other.split(".")[1], None)

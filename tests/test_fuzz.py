@@ -59,8 +59,13 @@ scalars = st.one_of(
     st.sampled_from([0, 1, -1, 4, 5000, 5001, 1e308, -1e308, 1e-320, 0.5, 2.0, 3.0, 3.5]),
     st.sampled_from(TRICKY_TEXT), st.text(max_size=6),
 )
-values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=3)
-                      | st.dictionaries(st.text(max_size=4), inner, max_size=2), max_leaves=5)
+# a list or a mapping as often as a scalar: a key given a container where a scalar belongs
+# (`scene: []`) is the mutation that found the first bug
+values = st.one_of(
+    scalars, st.lists(scalars, max_size=3), st.dictionaries(st.text(max_size=4), scalars,
+                                                            max_size=2),
+    st.recursive(scalars, lambda inner: st.lists(inner, max_size=3)
+                 | st.dictionaries(st.text(max_size=4), inner, max_size=2), max_leaves=5))
 
 
 def schema_paths() -> list[tuple]:
@@ -170,7 +175,9 @@ def test_mutated_shipped_files_load_or_are_refused_by_key(tmp_path_factory, data
         ("scene",), ("set",), ("axes",), ("sampler",), ("samples",), ("seed",), ("columns",),
         ("axes", "twist_density"), ("axes", "extension"), ("axes", "force_multiple"),
         ("axes", "twist_density_current"), ("set", "rod.elements")])
-    target = data.draw(st.sampled_from(known) | st.tuples(st.text(max_size=5)), label="path")
+    top = sorted({p[:1] for p in known}, key=str)
+    target = data.draw(st.sampled_from(top) | st.sampled_from(known)
+                       | st.tuples(st.text(max_size=5)), label="path")
     op = data.draw(st.sampled_from(["set", "set", "set", "delete"]), label="op")
     value = data.draw(values, label="value")
     inside = mutate(inside, target, op, value)
@@ -181,6 +188,23 @@ def test_mutated_shipped_files_load_or_are_refused_by_key(tmp_path_factory, data
     path.write_text(yaml.safe_dump(raw if kind == "sweep" else inside, allow_unicode=True),
                     encoding="utf-8")
     contract(path, kind)
+
+
+# every top-level key of every shipped scene, given a value of every YAML type (in memory: a
+# few milliseconds for all), beside the random mutations above
+TYPE_SAMPLES = [None, True, 0, -1, 2.5, float("nan"), float("inf"), "", "x", "nan", [], [1.0],
+                {}, {"a": 1}, {"elements": []}]
+
+
+@pytest.mark.parametrize("source", SCENE_FILES, ids=lambda p: p.stem)
+def test_every_top_level_key_of_every_shipped_scene_takes_every_type(source):
+    raw = yaml.safe_load(source.read_text())
+    for key in sorted(set(raw) | {"scene", "description", "initial_state"} | set(C.SCENE_SCHEMA)):
+        for value in TYPE_SAMPLES:
+            try:
+                finite_everywhere(C.validate_scene({**raw, key: value}, SCENES).plain())
+            except C.ConfigError as exc:
+                assert exc.path.strip() and "\n" not in str(exc), (key, value, str(exc))
 
 
 @fuzz(max_examples=40)
@@ -255,6 +279,22 @@ def test_fuzzer_finds_kept_a_nan_description_and_named_odd_keys_on_one_line(raw,
     with pytest.raises(C.ConfigError) as caught:
         C.validate_scene({"scene": "twist_under_load", **raw}, SCENES)
     assert caught.value.path == path and "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("value", ["nan", "[]", "3", "''", "null"])
+def test_a_sweep_scene_section_set_to_a_scalar_is_refused_by_name(value):
+    """Found by the fuzzer: `rodphase config fig3_adaptive --set loading=nan` ended in
+    AttributeError ('str' object has no attribute 'pop') where the axes clear their keys;
+    and `loading: []` (or 0, or '') was taken for an empty section."""
+    overrides = [C.parse_override(f"loading={value}")]
+    if value == "null":
+        C.load_sweep("fig3_adaptive", overrides, SCENES)  # an empty section: the defaults
+        return
+    with pytest.raises(C.ConfigError) as caught:
+        C.load_sweep("fig3_adaptive", overrides, SCENES)
+    assert caught.value.path == "loading" and "a mapping of" in caught.value.allowed
+    out = CliRunner().invoke(main, ["config", "fig3_adaptive", f"--set=loading={value}"])
+    assert out.exit_code == 2 and out.stderr.startswith("error: loading: "), out.output
 
 
 def test_a_set_value_yaml_cannot_read_is_one_line():
