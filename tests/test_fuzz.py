@@ -154,7 +154,8 @@ def contract(path: Path, kind: str, overrides=(), sets=()) -> C.ConfigError | No
     out = CliRunner().invoke(main, ["config", str(path), *[f"--set={s}" for s in sets]])
     if error is None:
         assert out.exit_code == 0, (out.output, out.exception)
-        assert not out.stderr, out.stderr
+        # (a warning may go to stderr: rod.elements below what the rod needs)
+        assert "error:" not in out.stderr and "Traceback" not in out.stderr, out.stderr
     else:
         assert out.exit_code == 2, (out.output, out.exception)
         lines = out.stderr.splitlines()
@@ -196,6 +197,7 @@ TYPE_SAMPLES = [None, True, 0, -1, 2.5, float("nan"), float("inf"), "", "x", "na
                 {}, {"a": 1}, {"elements": []}]
 
 
+@pytest.mark.filterwarnings("ignore::rodphase.config.ResolutionWarning")  # a valid, coarse rod
 @pytest.mark.parametrize("source", SCENE_FILES, ids=lambda p: p.stem)
 def test_every_top_level_key_of_every_shipped_scene_takes_every_type(source):
     raw = yaml.safe_load(source.read_text())

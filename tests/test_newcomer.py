@@ -224,21 +224,29 @@ def test_a_fresh_sweep_summary_is_as_before(tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------- the value in force, once
 
-def test_config_shows_a_value_set_twice_once_and_where_it_came_from():
+def test_config_shows_a_value_set_twice_once_and_where_it_came_from(tmp_path):
     """`rodphase config fig3_paper --set rod.elements=160` printed rod.elements: 80 under
-    sweep.set and elements: 160 in the scene."""
+    sweep.set and elements: 160 in the scene (fig3_paper's sweep.set had rod.elements: 80
+    then; the same sweep file here)."""
     import yaml
 
-    out = cli("config", "fig3_paper", "--set", "rod.elements=160")
+    sweep = tmp_path / "fig3_like.yaml"
+    sweep.write_text("sweep:\n  scene: scenes/twist_under_load.yaml\n  set: {rod.elements: 80, "
+                     "solver.slow_down_to: 0.25}\n  axes: {twist_density: [0.0, 2.6], "
+                     "extension: [1.0, 1.3]}\n")
+    out = cli("config", sweep, "--set", "rod.elements=160")
     assert out.exit_code == 0, out.output
     printed = yaml.safe_load(out.stdout)
     assert "rod.elements" not in printed["sweep"]["set"]
-    assert printed["sweep"]["set"]["solver.refine_up_to"] == 160  # the others stay
+    assert printed["sweep"]["set"]["solver.slow_down_to"] == 0.25  # the others stay
     assert printed["scene"]["rod"]["elements"] == 160
     assert "#   rod.elements: 160 from --set (replacing sweep.set's 80)" in out.stdout
     assert "#   solver.slow_down_to: 0.25 from sweep.set" in out.stdout
-    assert [ln for ln in out.stdout.splitlines() if "elements" in ln and "#" not in ln] == [
+    assert [ln for ln in out.stdout.splitlines() if ln.strip().startswith("elements:")] == [
         "    elements: 160"]
+    shipped = cli("config", "fig3_paper", "--set", "solver.slow_down_to=0.5")
+    assert "#   solver.slow_down_to: 0.5 from --set (replacing sweep.set's 0.25)" in shipped.stdout
+    assert "slow_down_to" not in str(yaml.safe_load(shipped.stdout)["sweep"]["set"])
     scene = cli("config", "twist_under_load", "--set", "rod.elements=60")
     assert "#   rod.elements: 60 from --set" in scene.stdout
     assert yaml.safe_load(scene.stdout)["scene"]["rod"]["elements"] == 60
