@@ -279,8 +279,8 @@ def _escapes_line(result) -> str:
               "in flight are sent again), or for a worker once every worker has left.")
 @click.option("--retry-failed", is_flag=True, help="Run again the runs that failed before.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
-@click.option("--quiet", is_flag=True, help="No progress bar (without a terminal: no progress "
-              "line every 30 s).")
+@click.option("--quiet", is_flag=True, help="No progress bar (none either when stderr is not a "
+              "terminal).")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
 def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry_failed, sets,
