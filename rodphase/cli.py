@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -168,25 +169,36 @@ def run(scene, output, sets, force):
     cfg = checked_initial_state(load_scene(scene, _overrides(sets), SCENES))
     from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
+    from .sweep import Interrupted, interruptible, stop_on_signals
     from .tabulate import classify_store
 
     check_memory(cfg)  # a run whose snapshots cannot fit is refused before it costs anything
     make_output_folder(output)
+    existed = Path(output).exists()
     # the output is opened (locked, its config checked) before simulating: a run that cannot
-    # be written is refused before it costs anything
-    with open_store(output, config_text=to_yaml(scene=cfg), config_hash=config_hash(cfg),
-                    version=__version__, kind="run", replace=force,
-                    earlier=earlier_hashes(cfg)) as store:
-        from .runner import compile_kernel, cpu_seconds
+    # be written is refused before it costs anything. Ctrl-C and SIGTERM stop it as they stop
+    # a sweep (never inside the store's write), and say what was kept
+    with stop_on_signals() as stop:
+        try:
+            with open_store(output, config_text=to_yaml(scene=cfg),
+                            config_hash=config_hash(cfg), version=__version__, kind="run",
+                            replace=force, earlier=earlier_hashes(cfg)) as store:
+                from .runner import compile_kernel, cpu_seconds
 
-        click.echo("Compiling the kernel (once; numba caches it on disk) ...")
-        cpu = cpu_seconds()
-        wall = compile_kernel()  # kept out of the run's own timing
-        click.echo(f"  ready in {wall:.1f} s (CPU {cpu_seconds() - cpu:.1f} s)")
-        click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
-        result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
-        store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
-        table = classify_store(store)
+                click.echo("Compiling the kernel (once; numba caches it on disk) ...")
+                cpu = cpu_seconds()
+                with interruptible():
+                    wall = compile_kernel()  # kept out of the run's own timing
+                click.echo(f"  ready in {wall:.1f} s (CPU {cpu_seconds() - cpu:.1f} s)")
+                click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
+                started = time.perf_counter()
+                with interruptible():
+                    result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
+                store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
+                table = classify_store(store)
+        except Interrupted:
+            _stopped_run(output, existed, stop.signal_name,
+                         time.perf_counter() - started if "started" in locals() else None)
     d = result.diagnostics
     click.echo(f"{result.status}: {result.message}")
     if d.get("dt_asleep") is not None and d.get("contact_woke_at") is None:
@@ -208,6 +220,29 @@ def run(scene, output, sets, force):
     if escapes:
         click.echo(escapes)
     sys.exit(0 if result.ok else 1)
+
+
+def _stopped_run(output, existed: bool, signal_name: str, seconds: float | None) -> None:
+    """A run stopped by a signal: what was kept, how to go on; exit 128 + the signal's
+    number, as a stopped sweep. A run is stored whole or not at all, so a store that this
+    command made holds nothing and is removed."""
+    import signal
+
+    from .store import lock_path, parts_folder
+
+    when = "while compiling" if seconds is None else f"after {seconds:.1f} s of the run"
+    if existed:
+        kept = f"{output} is as it was"
+    else:
+        for leftover in (Path(output), lock_path(output)):
+            leftover.unlink(missing_ok=True)
+        if parts_folder(output).is_dir() and not any(parts_folder(output).iterdir()):
+            parts_folder(output).rmdir()
+        kept = f"{output}, made by this command, was removed"
+    click.echo(f"stopped by {signal_name} {when}: a run is stored only once it has finished, "
+               f"so nothing was stored ({kept}); run the same command to start it again.",
+               err=True)
+    sys.exit(128 + signal.Signals[signal_name].value)
 
 
 def _escapes_line(result) -> str:
@@ -282,7 +317,9 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
                            scheduler=scheduler, retry_failed=retry_failed, replace=force,
                            # a bar's carriage returns garble a log file (batch jobs, CI)
                            progress=not quiet and sys.stderr.isatty(), echo=click.echo,
-                           reconnect_timeout=patience)
+                           reconnect_timeout=patience,
+                           # without a terminal (nohup, CI), a line at a steady pace instead
+                           lines=None if quiet or sys.stderr.isatty() else click.echo)
     except ClusterLost as exc:
         import shlex
 
@@ -302,14 +339,39 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     by_status = Counter(status for _, status, _ in report.failures)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(by_status.items())) or "0 failed"
     compiled = f" (+ {report.compile_time:.1f} s compiling)" if report.compile_time else ""
-    click.echo(f"{report.done} ok, {counts}, {report.skipped} skipped of {report.total} in "
-               f"{report.wall:.1f} s{compiled}; written to {output}")
-    for run_id, status, message in report.failures:
+    this_time = "this time: " if report.skipped else ""
+    click.echo(f"{this_time}{report.done} ok, {counts}, {report.skipped} skipped of "
+               f"{report.total} in {report.wall:.1f} s{compiled}; written to {output}")
+    failures = list(report.failures)
+    if report.skipped:
+        # a resumed sweep: the runs skipped count too (a failed one is skipped, not retried)
+        stored, earlier = _stored_summary(output, {rid for rid, _, _ in failures})
+        click.echo(stored)
+        failures += earlier
+        by_status.update(status for _, status, _ in earlier)
+    for run_id, status, message in failures:
         click.echo(f"  {run_id}: {status}: {message}")
     if by_status.get("not_converged"):
         click.echo("  (a not_converged run keeps its final shape: it is classified, and its "
                    "status says the hold ran out of time)")
-    sys.exit(0 if report.failed == 0 else 1)
+    if failures and report.skipped and not retry_failed:
+        click.echo("  (failed runs are kept and skipped; --retry-failed runs them again)")
+    sys.exit(0 if not failures else 1)
+
+
+def _stored_summary(output, listed: set[str]) -> tuple[str, list[tuple[str, str, str]]]:
+    """'OUT holds N runs: 39 ok, 1 unstable' and the failed runs stored before (those not in
+    `listed`), as (run id, status, message)."""
+    from .store import read_store
+
+    with read_store(output) as store:
+        table = store.table()
+    counts = Counter(table["status"]) if len(table) else Counter()
+    earlier = [(str(row.run_id), str(row.status), str(row.message).splitlines()[-1]
+                if str(row.message) else "") for row in table.itertuples()
+               if row.status != "ok" and str(row.run_id) not in listed]
+    text = ", ".join(f"{n} {status}" for status, n in sorted(counts.items())) or "no runs"
+    return f"{output} holds {len(table)} runs: {text}", earlier
 
 
 @main.command()
@@ -688,12 +750,41 @@ def config(name, sets):
         is_sweep = "sweep" in read_yaml(path)
     except ConfigError:
         is_sweep = False
+    overrides = _overrides(sets)
     if is_sweep:
-        sweep_cfg, scene_cfg = load_sweep(path, _overrides(sets), SCENES)
-        click.echo(to_yaml(sweep=sweep_cfg, scene=checked_initial_state(scene_cfg)), nl=False)
+        from .config import Frozen
+
+        sweep_cfg, scene_cfg = load_sweep(path, overrides, SCENES)
+        checked_initial_state(scene_cfg)
+        click.echo(_origins(sweep_cfg["set"], overrides), nl=False)
+        # a value of sweep.set that --set replaces is shown once, where it is in force
+        replaced = {k for k, _ in overrides if not k.startswith("sweep.")}
+        shown = Frozen({**sweep_cfg, "set": Frozen(
+            {k: v for k, v in sweep_cfg["set"].items() if k not in replaced})})
+        click.echo(to_yaml(sweep=shown, scene=scene_cfg), nl=False)
     else:
-        scene_cfg = checked_initial_state(load_scene(name, _overrides(sets), SCENES))
+        scene_cfg = checked_initial_state(load_scene(name, overrides, SCENES))
+        click.echo(_origins({}, overrides), nl=False)
         click.echo(to_yaml(scene=scene_cfg), nl=False)
+
+
+def _origins(sweep_set, overrides) -> str:
+    """YAML comments saying which scene values come from sweep.set and --set, rather than
+    from the scene file or the defaults ("" if none do)."""
+    lines = []
+    given = dict(overrides)
+    for key, value in sweep_set.items():
+        if key in given:
+            lines.append(f"#   {key}: {given[key]!r} from --set (replacing sweep.set's "
+                         f"{value!r})")
+        else:
+            lines.append(f"#   {key}: {value!r} from sweep.set")
+    lines += [f"#   {key}: {value!r} from --set" for key, value in given.items()
+              if key not in sweep_set]
+    if not lines:
+        return ""
+    return "# set on top of the config files (their other values are the files' or defaults):\n" + (
+        "\n".join(lines) + "\n")
 
 
 @main.command()

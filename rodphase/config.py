@@ -457,9 +457,12 @@ AXES = {
 def _unknown(path: str, key: str, known, value) -> ConfigError:
     """A key that is not one of `known`: its path and the value given to it, and the keys
     allowed there (the nearest first, if one is near)."""
-    close = difflib.get_close_matches(key, list(known), n=1)
+    named = isinstance(key, str) and key.isprintable() and key.strip() and key == key.strip()
+    close = difflib.get_close_matches(key, list(known), n=1) if named else []
     hint = f"; did you mean '{close[0]}'?" if close else ""
-    return ConfigError(f"{path}{key}", value, "a known key, one of " + ", ".join(known) + hint)
+    # an empty, blank, multi-line or non-text key (`"": 1`, `null: 1`, `3: 1`): as written
+    return ConfigError(f"{path}{key if named else repr(key)}", value,
+                       "a known key, one of " + ", ".join(known) + hint)
 
 
 def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
@@ -470,14 +473,20 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
         if key not in SCENE_KEYS:
             raise _unknown("", key, SCENE_KEYS, raw[key])
     name = raw.get("scene")
-    if registered is not None and name not in registered:
+    # a list or a mapping is no scene name (and `in` a dict of names would raise TypeError)
+    if registered is not None and (not isinstance(name, str) or name not in registered):
         raise ConfigError("scene", name, "one of " + ", ".join(sorted(registered)))
-    out: dict[str, Any] = {"scene": text("scene", name),
-                           "description": raw.get("description", "")}
+    description = raw.get("description")
+    if description is not None and not isinstance(description, str):
+        # kept as given it would carry a NaN, a list or a mapping into the stored config
+        raise ConfigError("description", description, "text, a sentence saying what the "
+                          "scene is")
+    out: dict[str, Any] = {"scene": text("scene", name), "description": description or ""}
     if "initial_state" in raw:
         out["initial_state"] = initial_state("initial_state", raw["initial_state"])
     for section, fields in SCENE_SCHEMA.items():
-        given = raw.get(section) or {}
+        given = raw.get(section)
+        given = {} if given is None else given  # `rod:` alone; but not [], 0 or "" for one
         if not isinstance(given, dict):
             raise ConfigError(section, given, "a mapping of " + ", ".join(fields))
         values = {}
@@ -699,6 +708,8 @@ def stored_config(text: str) -> dict:
     """The resolved config a store carries (its config_yaml attribute), read with the same
     strict loader as config files (a file from elsewhere may hold an alias bomb); {} when it
     is not a YAML mapping."""
+    if not isinstance(text, str):
+        return {}  # an attribute of another type (a damaged file, another program's)
     try:
         data = _yaml(text or "")
     except yaml.YAMLError:
@@ -720,7 +731,9 @@ def parse_override(item: str) -> tuple[str, Any]:
     try:
         parsed = _yaml(value)
     except yaml.YAMLError as exc:
-        raise ConfigError(key, value, f"a YAML value ({getattr(exc, 'problem', exc)})") from None
+        # a ReaderError (a control character) has no .problem and a two-line str: one line
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(key, value, f"a YAML value ({problem})") from None
     return key, parsed
 
 
@@ -840,10 +853,76 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
         # the axis replaces whatever the scene said about the same control
         section = AXES[axis][1].split(".")[0]
         scene_raw.setdefault(section, {})
+        if not isinstance(scene_raw[section], dict):
+            continue  # --set loading=nan: validate_scene refuses it, naming the section
         for other in _axis_controls(axis):
             if other != AXES[axis][1]:
                 scene_raw[section].pop(other.split(".")[1], None)
-    return sweep, validate_scene(scene_raw, registered)
+    scene = validate_scene(scene_raw, registered)
+    check_onset_reach(sweep, scene)
+    return sweep, scene
+
+
+# Issue #47 item 4. The extension axis goes to L/L0 = 2 and the twist axis to |Φa| = 3, but
+# the straight rod's buckling twist passes Φa = 3 near L/L0 = 1.48: above it a sweep finds
+# only straight rods. Widening the twist range does not help: measured with Fig 3's settings
+# (n = 80, refined to 160, quasi-static start at 0.8 of the onset, slow-down to 0.25 turns/s),
+# a run just past the onset buckles into a solenoid at L/L0 = 1.3 (Φa = 2.5), but at
+# L/L0 = 1.4, 1.45, 1.5, 1.7, 1.8, 1.9 and 2.0 (Φa = 2.9 ... 6.0, each 4-13 % past its onset)
+# it stops unstable (an element sheared past 45°, or the end frame lagging its clamp), while
+# the straight rod below the onset runs to equilibrium (L/L0 = 2, Φa = 4.9). So the twist
+# range stays, and a twist-density sweep whose extension axis goes past what that range can
+# buckle is refused, saying so.
+def check_onset_reach(sweep: Frozen, scene: Frozen) -> None:
+    """Refuse a sweep over twist_density and extension whose extension axis goes past the
+    L/L0 at which the straight rod's buckling twist passes the largest twist density allowed
+    (TWIST_DENSITY_RANGE): no sample there could buckle, whatever the twist axis. The
+    buckling twist is the sheared clamped Greenhill twist of the scene's rod (the model's own
+    onset for many elements; at n = 80 that is 1-5 % lower), checked for a rod clamped at
+    both ends under an end load (other scenes are not)."""
+    if "twist_density" not in sweep.axes or "extension" not in sweep.axes:
+        return
+    onset = _onset_twist_density(scene)
+    top = TWIST_DENSITY_RANGE[1]
+    low, high = sweep.axes["extension"]
+    try:
+        if onset is None or onset(high) <= top:
+            return
+        a, b = 1.0, high  # the onset grows with the extension: bisect for where it is `top`
+        for _ in range(40):
+            a, b = ((a + b) / 2, b) if onset((a + b) / 2) <= top else (a, (a + b) / 2)
+        at_high = onset(high)
+    except ValueError:  # no onset line for this rod (tension at its shear stiffness)
+        return
+    raise ConfigError("sweep.axes.extension", [low, high], (
+        f"a high end of at most L/L0 = {a:.3g} with a twist_density axis: above it the "
+        f"straight rod's buckling twist passes Phi*a = {top:g}, the largest twist density "
+        f"allowed (it is {at_high:.3g} at L/L0 = {high:g}), so no sample there could buckle; "
+        "the twist range is not wider because past the onset above L/L0 ~ 1.4 the model's "
+        "rod stops unstable (sheared past its guards) instead of buckling"))
+
+
+def _onset_twist_density(scene: Frozen):
+    """e ↦ the sheared clamped Greenhill twist of the scene's straight rod stretched to e, as
+    the rest Φa; None for a scene other than a rod clamped at both ends under an end load
+    with the paper's incompressible law."""
+    from .rod.model import Rod
+    from .rod.onset import sheared_greenhill_turns
+
+    ends, material, rod_cfg = scene["ends"], scene["material"], scene["rod"]
+    if not (ends.start == "clamped" and ends.end_axial == "force" and ends.end_lateral == "held"
+            and ends.end_rotation == "held" and material.incompressible
+            and material.law == "paper"):
+        return None
+    rod = Rod(length=rod_cfg.length, radius=rod_cfg.radius, elements=rod_cfg.elements,
+              youngs_modulus=material.youngs_modulus, shear_modulus=None
+              if material.shear_modulus == "auto" else material.shear_modulus,
+              bend_stiffness_given=material.bend_stiffness,
+              twist_stiffness_given=material.twist_stiffness,
+              shear_stiffness_given=material.shear_stiffness,
+              axial_stiffness_given=material.axial_stiffness)
+    to_phi = units.TURN * rod.radius / rod.length
+    return lambda e: sheared_greenhill_turns(rod, e) * to_phi
 
 
 def _axis_controls(axis: str) -> tuple[str, ...]:
