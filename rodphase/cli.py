@@ -264,16 +264,26 @@ def _escapes_line(result) -> str:
             f"{count} escape(s) past the ends {detail}").rstrip()
 
 
+def _where_runs_go(command):
+    """--jobs, --backend and --scheduler: the options of every command that runs a sweep."""
+    for option in reversed([
+            click.option("--jobs", "-j", default=2, show_default=True,
+                         type=click.IntRange(1, 4096), help="Parallel workers (processes)."),
+            click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
+                         show_default=True,
+                         help="loky: processes on this machine; dask: a Dask cluster."),
+            click.option("--scheduler", default=None, metavar="ADDRESS",
+                         help="Dask scheduler address (tcp://host:8786); default: a local "
+                         "cluster.")]):
+        command = option(command)
+    return command
+
+
 @main.command()
 @click.argument("sweep_file", metavar="SWEEP.yaml", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="HDF5 file; rerunning into it resumes and skips finished runs.")
-@click.option("--jobs", "-j", default=2, show_default=True, type=click.IntRange(1, 4096),
-              help="Parallel workers (processes).")
-@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
-              show_default=True, help="loky: processes on this machine; dask: a Dask cluster.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Dask scheduler address (tcp://host:8786); default: a local cluster.")
+@_where_runs_go
 @click.option("--reconnect-timeout", default="120", show_default=True, metavar="SECONDS",
               help="Dask: how long to wait for a lost scheduler to answer again (then the runs "
               "in flight are sent again), or for a worker once every worker has left.")
@@ -391,12 +401,7 @@ def _stored_summary(output, listed: set[str]) -> tuple[str, list[tuple[str, str,
               help="Width in Phi*a of the triple point's bracket [default 0.05].")
 @click.option("--levels", type=int, default=None,
               help="Twist levels of the first round, spread over the box [default 6].")
-@click.option("--jobs", "-j", default=2, show_default=True, type=click.IntRange(1, 4096),
-              help="Parallel workers (processes).")
-@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
-              show_default=True, help="loky: processes on this machine; dask: a Dask cluster.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Dask scheduler address (tcp://host:8786); default: a local cluster.")
+@_where_runs_go
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
