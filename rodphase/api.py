@@ -28,7 +28,7 @@ from . import config
 # run_sweep and classify_file, not sweep and classify: those are the names of rodphase's own
 # modules, which would replace the functions as package attributes once imported
 __all__ = ["classify_file", "histories", "load", "load_sweep", "open", "run", "run_sweep",
-           "table"]
+           "table", "trace_boundaries"]
 
 
 def _overrides(overrides, settings: dict) -> list[tuple[str, Any]]:
@@ -243,6 +243,59 @@ def run_sweep(sweep, output, overrides=None, *, jobs: int | None = None, backend
     if report.stopped_by:
         raise KeyboardInterrupt(f"stopped by {report.stopped_by}; call again to go on")
     return classify_file(output)
+
+
+def trace_boundaries(sweep, output=None, overrides=None, *, only_onset: bool = False,
+               tolerance: float | None = None, twist_tolerance: float | None = None,
+               levels: int | None = None, jobs: int | None = None, backend: str = "loky",
+               scheduler: str | None = None, replace: bool = False,
+               progress: bool | None = None, **settings):
+    """The phase diagram's lines for a sweep's box: the straight rod's onset, the
+    plectoneme–solenoid boundary and the triple point, each with its bracket (as
+    ``rodphase boundaries``; see rodphase.boundaries).
+
+    Parameters
+    ----------
+    sweep, overrides, **settings
+        As for `load_sweep`; the sweep's axes must be twist_density and extension.
+    output : str or path, optional
+        The HDF5 store of the runs the trace places (resumed like any sweep); not needed
+        with `only_onset`.
+    only_onset : bool
+        Only the onset line, from the model's static stability: no runs, nothing stored.
+    tolerance, twist_tolerance, levels : optional
+        The width in L/L0 of a plectoneme–solenoid bracket (0.005), the width in Φa of the
+        triple point's (0.05), the twist levels of the first round (6).
+    jobs, backend, scheduler, replace, progress
+        As for `run_sweep`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per boundary point: ``kind`` (onset, plectoneme_solenoid, triple_point),
+        ``extension``, ``twist_density``, their brackets ``extension_low``/``_high`` and
+        ``twist_density_low``/``_high``, and flags (rodphase.boundaries.COLUMNS);
+        ``attrs["claims"]``: the onset's slope and intercept at high extension with their
+        errors, and the extension from which solenoids win.
+    """
+    from .boundaries import sweep_for_boundaries, trace
+
+    chosen = {"tolerance": tolerance, "twist_tolerance": twist_tolerance, "levels": levels}
+    sweep_cfg, scene_cfg = sweep_for_boundaries(sweep, _overrides(overrides, settings), chosen)
+    if not only_onset and output is None:
+        raise config.ConfigError("output", None, "a store path for the runs (or only_onset)")
+    jobs = max(1, os.cpu_count() or 1) if jobs is None else int(jobs)
+    progress = interactive() if progress is None else bool(progress)
+    if output is not None:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+    found = trace(sweep_cfg, scene_cfg, None if output is None else str(output),
+                  only_onset=only_onset, jobs=jobs, backend=backend, scheduler=scheduler,
+                  progress=progress, echo=_say if progress else lambda _: None,
+                  replace=replace)
+    if found.report is not None and found.report.stopped_by:
+        raise KeyboardInterrupt(f"stopped by {found.report.stopped_by}; call again to go on")
+    found.table.attrs["claims"] = found.claims
+    return found.table
 
 
 def classify_file(path, **thresholds):

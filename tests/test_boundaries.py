@@ -197,3 +197,13 @@ def test_another_filaments_onset_line_follows_its_own_rod():
     paper_line = B.onset_line(paper, paper_sweep, settings).iloc[1:]
     assert np.allclose(line["twist_density"], paper_line["twist_density"], rtol=0.01)
     assert np.all(line["twist_density"] < paper_line["twist_density"])
+
+
+def test_the_same_from_python():
+    table = rodphase.trace_boundaries("fig3_paper", only_onset=True, progress=False,
+                                       rod__element_length=1.0)
+    assert set(table["kind"]) == {"onset"} and len(table) == 41
+    claims = table.attrs["claims"]
+    assert claims["onset_slope"] > 0 and claims["onset_slope_error"] < 0.1 * claims["onset_slope"]
+    with pytest.raises(rodphase.config.ConfigError, match="output"):
+        rodphase.trace_boundaries("fig3_paper", progress=False)
