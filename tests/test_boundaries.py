@@ -174,7 +174,7 @@ def test_a_small_trace_finds_a_boundary_stores_its_runs_and_resumes(tmp_path):
     assert stored is not None and len(stored) == len(first.table)
     assert {"level", "step", "twist_density", "extension"} <= set(runs.columns)
     assert first.report.done + first.report.failed == len(runs) > 0
-    again = B.trace(sweep, scene, out, jobs=1, echo=lambda text: None)
+    again = B.trace(sweep, scene, out, jobs=2, echo=lambda text: None)
     assert again.report.skipped == again.report.total == len(runs)
     pd.testing.assert_frame_equal(again.table, first.table)
     ps = first.table[first.table["kind"] == "plectoneme_solenoid"]
