@@ -6,7 +6,7 @@ STAMP   = $(VENV)/.installed
 OUT    ?= out
 JOBS   ?= 2
 
-.PHONY: help install demo test test-slow test-all lint clean
+.PHONY: help install demo test test-slow test-all lint clean docs docs-serve
 
 ##@ Use
 help:  ## list the targets
@@ -50,13 +50,24 @@ test-all: test test-slow  ## every test: `make test`, then the long tier (what C
 lint: $(STAMP)  ## static checks (ruff)
 	$(BIN)/ruff check rodphase tests benchmarks studies
 
+DOCS_STAMP = $(VENV)/.docs-installed
+$(DOCS_STAMP): $(STAMP) pyproject.toml $(CONSTRAINTS)
+	$(BIN)/pip install --quiet -e ".[docs]" $(if $(CONSTRAINTS),-c $(CONSTRAINTS))
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)  ## build the docs site into out/site (strict: a warning or a broken link fails)
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/mkdocs build --strict --quiet
+
+docs-serve: $(DOCS_STAMP)  ## serve the docs at http://127.0.0.1:8000, rebuilt on every edit
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/mkdocs serve
+
 clean:  ## remove outputs (keeps .venv)
 	rm -rf $(OUT) .pytest_cache
 
-##@ Benchmarks (benchmarks/; the timings depend on the machine and its load, see docs/benchmarks.md)
-# `make bench` is the four that docs/benchmarks.md reports; each script also has its own target.
+##@ Benchmarks (benchmarks/; the timings depend on the machine and its load: docs/explanation/performance.md)
+# `make bench` is the four that docs/history/benchmarks.md reports; each script also has its own target.
 .PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
-	bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
+	current-fig3 bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
 	bit-identical base-tree
 BASE ?= main
 BASE_TREE = $(OUT)/base-rodphase
@@ -66,21 +77,24 @@ bench: bench-kernel bench-topology bench-map bench-compile  ## kernel and topolo
 bench-extra: $(STAMP)
 	$(BIN)/pip install --quiet -e ".[bench]"
 
-bench-kernel: bench-extra  ## µs per step against PyElastica 1.0, into docs/benchmarks.md
-	$(BIN)/python benchmarks/bench_kernel.py --write docs/benchmarks.md
+bench-kernel: bench-extra  ## µs per step against PyElastica 1.0, into docs/history/benchmarks.md
+	$(BIN)/python benchmarks/bench_kernel.py --write docs/history/benchmarks.md
 
 bench-topology: bench-extra  ## link, twist and writhe per frame against PyElastica's knot_theory
 	$(BIN)/python benchmarks/bench_topology.py
 
 bench-map: $(STAMP)  ## Fig 3's sweep timed, labels against a finer reference, per-scene savings (docs/)
-	$(BIN)/python benchmarks/phase_timing.py savings --write docs/performance.md
+	$(BIN)/python benchmarks/phase_timing.py savings --write docs/history/performance.md
 	$(BIN)/python benchmarks/phase_timing.py reference --samples 40
 	$(BIN)/python benchmarks/phase_timing.py timing
-	$(BIN)/python benchmarks/phase_timing.py compare --write docs/performance.md --write docs/benchmarks.md
+	$(BIN)/python benchmarks/phase_timing.py compare --write docs/history/performance.md --write docs/history/benchmarks.md
 
 bench-compile: $(STAMP)  ## first compile on an empty numba cache: make demo's steps, then per function
 	$(BIN)/python benchmarks/compile_time.py demo --jobs $(JOBS)
 	$(BIN)/python benchmarks/compile_time.py functions
+
+current-fig3: $(STAMP)  ## Fig 3 as it ships: time, labels, fit into docs/current.json, the map into docs/img
+	$(BIN)/python benchmarks/current_fig3.py --jobs $(JOBS)
 
 bench-overhead: $(STAMP)  ## what a stored run costs beyond its simulation (2,000 tiny runs)
 	$(BIN)/python benchmarks/bench_overhead.py --jobs $(JOBS)
@@ -96,11 +110,11 @@ bench-interleaved: $(STAMP) base-tree  ## kernel CPU µs/step of BASE (default m
 bench-laws: $(STAMP)  ## µs per step of the paper's law and the neo-Hookean one, interleaved
 	$(BIN)/python benchmarks/bench_laws.py
 
-bench-step-parts: $(STAMP)  ## where a Fig 3 step goes; what a Newton iteration would cost (docs/performance.md)
-	$(BIN)/python benchmarks/step_parts.py --write docs/performance.md
+bench-step-parts: $(STAMP)  ## where a Fig 3 step goes; what a Newton iteration would cost (docs/history/performance.md)
+	$(BIN)/python benchmarks/step_parts.py --write docs/history/performance.md
 
-bench-work-precision: $(STAMP)  ## error against CPU time over n and dt (docs/performance.md, ~7 min)
-	$(BIN)/python benchmarks/work_precision.py --write docs/performance.md
+bench-work-precision: $(STAMP)  ## error against CPU time over n and dt (docs/history/performance.md, ~7 min)
+	$(BIN)/python benchmarks/work_precision.py --write docs/history/performance.md
 
 bench-map-methods: $(STAMP)  ## Fig 3 independent vs along paths: CPU, wall, boundary error against a fine reference (~35 min)
 	@test -f out/perf/map_reference.h5 || $(BIN)/python benchmarks/map_methods.py reference
@@ -117,10 +131,11 @@ bit-identical: $(STAMP) base-tree  ## short runs of the shipped scenes: this tre
 	$(BIN)/python benchmarks/reference_positions.py --compare $(OUT)/positions_base.npz $(OUT)/positions_here.npz
 
 ##@ Studies (studies/; each makes a figure or table of docs/, tests/test_studies_smoke.py runs it small)
-.PHONY: phase fig3 figures onset-study hat-curve stability-map damping-sweeps ramp-rate \
+.PHONY: phase fig3 lines figures docs-figures onset-study hat-curve stability-map damping-sweeps \
+	ramp-rate \
 	boundary-error crosscheck crosscheck-reference straight-start self-passage vibration-source \
 	robustness study-shear study-damping study-friction study-neo-hookean study-contact \
-	static-path hold-budget energy-audit
+	static-path hold-budget energy-audit twist-into-writhe twist-into-writhe-references
 phase: $(STAMP)  ## Fig 3 in the stretched-rod reading of Phi*a (configs/fig3_stretched.yaml); fig3 is the paper's
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase sweep configs/fig3_stretched.yaml -o $(OUT)/fig3_stretched.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
@@ -135,13 +150,25 @@ fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, wit
 	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
 	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
 
-figures: $(STAMP) fig3  ## every figure of the paper (see docs/reproduction.md)
+lines: $(STAMP)  ## Fig 3 as lines: the onset, the plectoneme-solenoid boundary and the triple point, with brackets
+	@mkdir -p $(OUT)
+	$(BIN)/rodphase boundaries fig3_paper -o $(OUT)/fig3_lines.h5 --csv $(OUT)/fig3_lines.csv --jobs $(JOBS) --quiet
+	$(BIN)/rodphase plot $(OUT)/fig3_lines.h5 --kind phase -o $(OUT)/fig3_lines.png
+
+figures: $(STAMP) fig3  ## every figure of the paper (docs/explanation/validation.md)
 	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
 
-onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/reproduction.md)
+# the figures docs/ shows: Fig 3's map (with its rows of docs/current.md) and the scene figures
+DOC_FIGURES = fig2a fig2b fig4a fig4b fig4c figS9 figS3
+docs-figures: current-fig3  ## redraw every figure of docs/img that validation shows (Fig 3 and the scene figures)
+	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
+	for f in $(DOC_FIGURES); do cp $(OUT)/$$f.png docs/img/repro_$$f.png; \
+		test ! -f $(OUT)/$${f}_shape.png || cp $(OUT)/$${f}_shape.png docs/img/repro_$${f}_shape.png; done
+
+onset-study: $(STAMP)  ## the straight rod's onset line under stiffer shear and G = E/3 (docs/history/onset.md)
 	$(BIN)/python studies/onset_study.py --write
 
-hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/reproduction.md)
+hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/history/scene-figures.md)
 	@mkdir -p $(OUT)
 	$(BIN)/rodphase run hat_curve -o $(OUT)/hat.h5
 	$(BIN)/rodphase plot $(OUT)/hat.h5 --kind hat -o $(OUT)/hat.png
@@ -149,21 +176,21 @@ hat-curve: $(STAMP)  ## hat curves: the scene at 25 F_C, then four forces (docs/
 	$(BIN)/rodphase sweep configs/hat_forces.yaml -o $(OUT)/hat_forces.h5 --jobs $(JOBS) || [ $$? -eq 1 ]
 	$(BIN)/python studies/hat_curve.py $(OUT)/hat_forces.h5 --plot $(OUT)/hat_forces
 
-stability-map: $(STAMP)  ## largest stable dt against the bound (docs/performance.md and its figure)
-	$(BIN)/python studies/stability_map.py --json $(OUT)/perf/stability_map.json --write docs/performance.md
+stability-map: $(STAMP)  ## largest stable dt against the bound (docs/history/performance.md and its figure)
+	$(BIN)/python studies/stability_map.py --json $(OUT)/perf/stability_map.json --write docs/history/performance.md
 
-damping-sweeps: $(STAMP)  ## holds that settle: the damping variants on the figures, the demo, Fig 3 (reproduction.md)
+damping-sweeps: $(STAMP)  ## holds that settle: the damping variants on the figures, the demo, Fig 3 (docs/history/holds-and-laws.md)
 	$(BIN)/python studies/damping_sweeps.py speed
 	$(BIN)/python studies/damping_sweeps.py demo --out $(OUT)/damping
 	$(BIN)/python studies/damping_sweeps.py figures --out $(OUT)/damping
 	$(BIN)/python studies/damping_sweeps.py fig3 --out $(OUT)/damping
 
-ramp-rate: $(STAMP)  ## Fig 3's twist ramp at several rates against a fine reference (docs/performance.md)
-	$(BIN)/python studies/ramp_rate.py --rates 0.25,0.5,1,2 --jobs $(JOBS) --out $(OUT)/ramp --write docs/performance.md
+ramp-rate: $(STAMP)  ## Fig 3's twist ramp at several rates against a fine reference (docs/history/performance.md)
+	$(BIN)/python studies/ramp_rate.py --rates 0.25,0.5,1,2 --jobs $(JOBS) --out $(OUT)/ramp --write docs/history/performance.md
 
 # issue #29 item 4: Fig 3 under one change at a time, point by point against the map as it ships
-VARIANTS_RUN = $(BIN)/python studies/map_variants.py --jobs $(JOBS) --out $(OUT)/variants --write docs/reproduction.md
-study-shear: $(STAMP)  ## Fig 3 with shear stiffness x 10 and G = E/3 against the default (reproduction.md)
+VARIANTS_RUN = $(BIN)/python studies/map_variants.py --jobs $(JOBS) --out $(OUT)/variants --write docs/history/fig3-corner.md
+study-shear: $(STAMP)  ## Fig 3 with shear stiffness x 10 and G = E/3 against the default (docs/history/fig3-corner.md)
 	$(VARIANTS_RUN) shear_x10 g_e3 --figure docs/img/map_shear.png
 study-damping: $(STAMP)  ## Fig 3 at half and twice the damping and without the quadratic drag
 	$(VARIANTS_RUN) damping_half damping_twice no_drag --figure docs/img/map_damping.png
@@ -179,7 +206,7 @@ FIG3_FAILURES = --point 2.4115579335018995 1.093481214158237 --point 2.490534851
 	--point 2.5258821224793793 1.079950714390725 --point 2.557734097540379 1.0524589744396509 \
 	--point 2.5985506212338807 1.1349544170312584
 energy-audit: $(STAMP)  ## Fig 3's five failures: the power the paper's law adds in their last second (reproduction.md)
-	$(BIN)/python studies/energy_audit.py $(FIG3_FAILURES) --write docs/reproduction.md
+	$(BIN)/python studies/energy_audit.py $(FIG3_FAILURES) --write docs/history/fig3-corner.md
 
 # the random sweep is fig3's; the reference (24 x 24 by continuation) and the adaptive one are its own
 boundary-error: fig3  ## phase-boundary error of random and adaptive sampling against a 24 x 24 reference
@@ -199,8 +226,28 @@ crosscheck: $(STAMP)  ## PyElastica's own example CASE (default solenoid) in rod
 crosscheck-reference: bench-extra  ## rerun example CASE in PyElastica 1.0 into tests/data (about an hour)
 	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference $(CASE)
 
-straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/performance.md)
-	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/performance.md
+twist-into-writhe: $(STAMP)  ## steps of twist into writhe, rodphase vs PyElastica one change at a time, and Fig 4a in both (docs/explanation/twist-into-writhe.md; ~30 min)
+	$(BIN)/python studies/twist_into_writhe.py rows solenoid
+	$(BIN)/python studies/twist_into_writhe.py rows plectoneme
+	$(BIN)/python studies/twist_into_writhe.py table solenoid --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py table plectoneme --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py fig4a --write docs/explanation/twist-into-writhe.md
+	$(BIN)/python studies/twist_into_writhe.py fig2 --write docs/explanation/twist-into-writhe.md
+
+# dt 1e-4 s (4x the example's, half rodphase's bound): the twist prescribed at the example's
+# as-run rate, the kick scaled to its force; the plain SolenoidsCase at that dt checks the step
+AS_RUN = --dt 1e-4 --prescribe-twist 0.8279066 --final-time 85 --contact-from 50
+twist-into-writhe-references: bench-extra  ## its PyElastica runs into tests/data: SolenoidsCase + thinning, 13-turn solenoid pulled, SolenoidsCase at dt 1e-4 (~1 h CPU)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 $(AS_RUN)
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --dt 1e-4 --contact-from 45 --sample 0.1
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_dt1e-4.npz -o tests/data/crosscheck_solenoid_dt1e-4.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split $(AS_RUN) --raw /tmp/crosscheck_raw_solenoid_rodphase_law.npz -o tests/data/crosscheck_solenoid_rodphase_law.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid_pull --turns 10.19 --dt 1e-4 --contact-from 40 --sample 0.1 --raw /tmp/crosscheck_raw_solenoid_pull_10.npz -o tests/data/crosscheck_solenoid_pull_10.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --kick-shape uniform --dt 1e-4 --prescribe-twist 0.8279066 --final-time 72 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_uniform_kick.npz -o tests/data/crosscheck_solenoid_uniform_kick.npz
+	NUMBA_NUM_THREADS=1 $(BIN)/python studies/crosscheck_pyelastica.py reference solenoid --thinning 1.0 --contact-split --final-time 85 --contact-from 50 --raw /tmp/crosscheck_raw_solenoid_rodphase_law_dt_example.npz -o tests/data/crosscheck_solenoid_rodphase_law_dt_example.npz
+
+straight-start: $(STAMP)  ## Fig 3 with and without the quasi-static straight start (docs/history/performance.md)
+	$(BIN)/python studies/straight_start.py --jobs $(JOBS) --out $(OUT)/straight --reference $(OUT)/perf/fig3_ref.h5 --write docs/history/performance.md
 
 # one point of twist_under_load: PHI = Phi*a (rest), EXT = L/L0
 PHI ?= 2.556
@@ -211,12 +258,12 @@ self-passage: $(STAMP)  ## where a run's link went: each link jump of the point 
 vibration-source: $(STAMP)  ## which part of the model sustains the vibration of a coil held in contact
 	$(BIN)/python studies/vibration_source.py
 
-robustness: $(STAMP)  ## the store under attack: kills, signals, a full disk, bad input (docs/robustness.md)
-	$(BIN)/python studies/robustness.py --kills 60 --write docs/robustness.md
+robustness: $(STAMP)  ## the store under attack: kills, signals, a full disk, bad input (docs/explanation/robustness.md)
+	$(BIN)/python studies/robustness.py --kills 60 --write docs/explanation/robustness.md
 
 static-path: $(STAMP)  ## Fig 3 columns followed in twist by the static corrector, against the kernel (performance.md)
-	$(BIN)/python studies/static_path.py --force-multiple 25 --start 0.9 --stop 1.25 --compare 1.0 1.1 1.25 --write docs/performance.md
-	$(BIN)/python studies/static_path.py --force-multiple 90 --start 1.55 --stop 1.9 --compare 1.65 1.75 1.9 --write docs/performance.md
+	$(BIN)/python studies/static_path.py --force-multiple 25 --start 0.9 --stop 1.25 --compare 1.0 1.1 1.25 --write docs/history/performance.md
+	$(BIN)/python studies/static_path.py --force-multiple 90 --start 1.55 --stop 1.9 --compare 1.65 1.75 1.9 --write docs/history/performance.md
 
 hold-budget: $(STAMP)  ## where fig3_paths' work goes: twist ramps against holds, how the holds end
 	@mkdir -p $(OUT)

@@ -19,7 +19,7 @@ milliseconds of simulation each, as the continuation solver will make them):
    ordering the jobs, and the progress bar.
 
 Numbers depend on the machine and its load: note `lscpu` model name and `uptime` with them
-(docs/benchmarks.md, "The cost around a run").
+(docs/history/benchmarks.md, "The cost around a run").
 """
 
 from __future__ import annotations

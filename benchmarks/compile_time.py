@@ -70,7 +70,9 @@ def _load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def demo(repeats: int, jobs: int, keep: str | None = None) -> None:
+def demo(repeats: int, jobs: int, keep: str | None = None, record: bool = False) -> None:
+    """make demo's steps on an empty numba cache, `repeats` times; with `record`, the last
+    repeat's compile and run times become rows of the current figures (docs/current.json)."""
     for r in range(repeats):
         cache, work = tempfile.mkdtemp(prefix="numba-cold-"), tempfile.mkdtemp(prefix="demo-")
         try:
@@ -86,6 +88,15 @@ def demo(repeats: int, jobs: int, keep: str | None = None) -> None:
                   f"{sweep['cpu']:.1f} s), classify {classify['wall']:.1f} s, plot "
                   f"{plot['wall']:.1f} s; total {sweep['wall'] + classify['wall'] + plot['wall']:.1f} s; "
                   f"load {load0} -> {_load()}", flush=True)
+            if record and r == repeats - 1 and sweep["compile"] is not None:
+                from rodphase.studytools import record_current
+
+                total = sweep["wall"] + classify["wall"] + plot["wall"]
+                record_current("compile_time", f"{sweep['compile']:.1f} s of compiling; the whole "
+                               f"first `make demo` {total:.1f} s", source="`make bench-compile`")
+                if sweep["runs"] is not None:
+                    record_current("demo_time", f"{sweep['runs']:.1f} s",
+                                   source="`make bench-compile`")
             if keep:
                 Path(keep).mkdir(parents=True, exist_ok=True)
                 shutil.copy(Path(work) / "quick.csv", Path(keep) / f"quick_{r + 1}.csv")
@@ -237,7 +248,7 @@ def main(argv=None) -> int:
         print(f"{m['cpu']}, nproc {m['nproc']}; python {sys.version.split()[0]}; rodphase from "
               f"{ROOT}", flush=True)
     if args.what == "demo":
-        demo(args.repeats, args.jobs, args.keep)
+        demo(args.repeats, args.jobs, args.keep, record=not args.repo)
     elif args.what == "run":
         run(args.repeats)
     else:

@@ -19,7 +19,7 @@ turns/s): finer, slower and independent of both methods' shortcuts.
 and its workers), labels, failed runs, and the boundary error against the reference: the
 share of reference points whose label the map's nearest point (in the box scaled to [0, 1]²)
 gets wrong (studytools.boundary_error). Writes out/perf/BLOCK.json and, with --write, the
-block BLOCK of docs/performance.md (--block, default "map_methods"). --methods picks the maps
+block BLOCK of docs/history/performance.md (--block, default "map_methods"). --methods picks the maps
 (METHODS; by default the three above; the hold-tolerance variants ask what a looser
 solver.hold_tolerance costs in labels). The machine and its load are printed with it.
 """
@@ -42,7 +42,7 @@ OUT = ROOT / "out" / "perf"
 METHODS = {"independent": ("configs/fig3_paper.yaml", []),
            "paths": ("configs/fig3_paths.yaml", []),
            "paths, 40 columns": ("configs/fig3_paths.yaml", ["sweep.columns=40"]),
-           # the holds end when the residual creeps under the tolerance (docs/performance.md,
+           # the holds end when the residual creeps under the tolerance (docs/history/performance.md,
            # "A twist continuation beside the soft modes"): what a looser one costs in labels
            "independent, hold tolerance 3e-3": ("configs/fig3_paper.yaml",
                                                 ["solver.hold_tolerance=3e-3"]),
@@ -110,7 +110,7 @@ def compare(rounds: int, jobs: int, write: bool, methods=DEFAULT_METHODS,
     text = "\n".join(lines)
     print(text)
     if write:
-        write_block(ROOT / "docs" / "performance.md", block, text)
+        write_block(ROOT / "docs" / "history" / "performance.md", block, text)
 
 
 def machine_line(before: dict, after: dict) -> str:
@@ -125,12 +125,12 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=60, help="reference: points")
     parser.add_argument("--rounds", type=int, default=2, help="compare: rounds")
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--write", action="store_true", help="compare: update docs/performance.md")
+    parser.add_argument("--write", action="store_true", help="compare: update docs/history/performance.md")
     parser.add_argument("--methods", default=";".join(DEFAULT_METHODS),
                         help="compare: the methods, separated by ';', 'independent' among them "
                         f"(known: {'; '.join(METHODS)})")
     parser.add_argument("--block", default="map_methods",
-                        help="compare: the block of docs/performance.md and the JSON's name")
+                        help="compare: the block of docs/history/performance.md and the JSON's name")
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     os.chdir(ROOT)

@@ -6,7 +6,7 @@ needs" switch.
     python benchmarks/phase_timing.py savings            # per-scene savings (one process)
     python benchmarks/phase_timing.py reference [--samples 40]   # fine sweep, --jobs 2
     python benchmarks/phase_timing.py timing             # configs/fig3_paper.yaml, --jobs 2
-    python benchmarks/phase_timing.py compare [--write docs/performance.md]
+    python benchmarks/phase_timing.py compare [--write docs/history/performance.md]
 
 `--config configs/fig3_phase.yaml` times the DESIGN's rest-Φa box instead of the paper's
 axes (give it to reference, timing and compare alike).

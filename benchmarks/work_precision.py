@@ -2,7 +2,7 @@
 """Work-precision: error against CPU time over the number of elements n and the time step.
 
     python benchmarks/work_precision.py [--only stretch,cantilever,greenhill,writhe] [--quick]
-                                     [--write docs/performance.md]
+                                     [--write docs/history/performance.md]
 
 Reference problems (the setups of tests/test_rod.py):
 
@@ -24,7 +24,7 @@ configuration is run with safety 0.5 and 0.25. CPU time is time.process_time() a
 = 1). µs/step is CPU time over steps.
 
 Writes docs/img/work_precision.png and out/perf/work_precision.json and prints Markdown tables
-(--write puts them into docs/performance.md between markers).
+(--write puts them into docs/history/performance.md between markers).
 """
 
 from __future__ import annotations

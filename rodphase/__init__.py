@@ -1,13 +1,13 @@
 """rodphase: phase diagrams of stretched and twisted soft filaments.
 
-From Python: rodphase.load, run, run_sweep, classify_file, open, table, histories (see
-rodphase.api);
-from the shell: the `rodphase` command.
+From Python: rodphase.load, run, run_sweep, trace_boundaries, classify_file, open, table,
+histories (see rodphase.api); from the shell: the `rodphase` command.
 """
 
 from ._version import __version__
 
-_API = ("classify_file", "histories", "load", "load_sweep", "open", "run", "run_sweep", "table")
+_API = ("classify_file", "histories", "load", "load_sweep", "open", "run", "run_sweep", "table",
+        "trace_boundaries")
 __all__ = ["__version__", *_API]
 
 

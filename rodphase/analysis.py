@@ -2,7 +2,7 @@
 
 Pure functions: arrays in ((N, 3) points, one per row, SI units), numbers or arrays out; no
 I/O, no plotting, no simulation. `rodphase.classify` builds its alignment on `partners`, and
-studies/figures.py builds the numbers of docs/reproduction.md on the rest.
+studies/figures.py builds the numbers of docs/explanation/validation.md on the rest.
 
 The reference for the definitions is Charles, Gazzola & Mahadevan, "Topology, geometry and
 mechanics of strongly stretched and twisted filaments" (PRL 2019): "the paper" below.
@@ -21,7 +21,7 @@ from .result import rotation_put_in
 __all__ = [
     "bursts", "coil_height", "free_coil_height", "helix_axis", "local_alignment",
     "partner_signs", "partners", "plectoneme_turns", "sawtooth_drops", "smooth",
-    "solenoid_geometry", "stage_rows", "twist_density",
+    "solenoid_geometry", "stage_rows", "twist_density", "writhe_steps",
 ]
 
 
@@ -275,6 +275,61 @@ def bursts(x, y, width: int, min_gain: float = 0.1, contrast: float = 1.5) -> li
         if gain >= min_gain and rate[peak] > contrast * max(rate[a], rate[b], 1e-12):
             out.append({"from": float(x[a]), "to": float(x[b]), "at": float(x[peak]),
                         "gain": gain, "rows": [int(a), int(b)]})
+    return out
+
+
+STEP_MIN = 0.3  # turns: half the writhe of one solenoid loop (0.6–0.85 turns), well above noise
+STEP_CONTRAST = 1.5  # a step's peak rate over the rate at both of its ends
+
+
+def writhe_steps(x, y, min_step: float = STEP_MIN, contrast: float = STEP_CONTRAST,
+                 width: int = 1, direction: int = +1) -> list[dict]:
+    """The steps in which y (writhe, turns) changes along x (twist, time or end displacement):
+    the paper's "twist into writhe in steps" (Fig 2a, 2b) and "loses a turn per drop" (Fig 4a),
+    counted rather than described (issue #49).
+
+    y is read as increments between consecutive samples (rodphase's cross-check resamples both
+    codes every 0.5 s, 0.08–0.1 turns of twist: `studies/twist_into_writhe.py`), so that a
+    step one or two samples long is not smeared into its neighbours. The increments' rates
+    split at their local minima (over ±`width` intervals) into segments; a segment is a step
+    when its peak rate exceeds `contrast` (1.5) times the rate of the two minima that bound it
+    and y gains at least `min_step` (0.3 turns: half a solenoid loop's writhe) between them.
+    So a smooth ramp, however steep, has no steps; a staircase of n rises ≥ 0.3 turns
+    separated by slower stretches has n; a collapse (one fast rise of several loops with no
+    slower stretch inside) is one. `direction` −1 counts steps of loss (Fig 4a's writhe under
+    the pull).
+
+    Returns, per step: "from", "to" (x where it starts and ends: the bounding minima), "at"
+    (the middle of its fastest interval), "gain" (turns, > 0 for either direction: the change
+    between the bounding minima, so it includes any slower growth up to the next minimum),
+    "to_value" (y at its end) and "rows" (the first and last sample of it).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if direction not in (1, -1):
+        raise ValueError(f"direction must be +1 or -1, got {direction!r}")
+    if len(x) != len(y) or len(x) < 3:
+        raise ValueError(f"x and y must have the same length >= 3, got {len(x)} and {len(y)}")
+    if np.any(np.diff(x) <= 0):
+        raise ValueError("x must increase")
+    rate = direction * np.diff(y) / np.diff(x)  # one per interval
+    m = len(rate)
+    width = max(1, int(width))
+    minima = sorted({0, m - 1} | {k for k in range(1, m - 1)
+                                  if rate[k] == rate[max(0, k - width):k + width + 1].min()})
+    out = []
+    for a, b in zip(minima[:-1], minima[1:]):
+        if b - a < 2:
+            continue
+        # the step: the intervals strictly between the two bounding minima
+        first, last = a + 1, b  # samples: from the start of interval a+1 to the end of b-1
+        peak = a + 1 + int(np.argmax(rate[a + 1:b]))
+        gain = direction * float(y[last] - y[first])
+        floor = max(rate[a], rate[b], 1e-12)
+        if gain >= min_step and rate[peak] > contrast * floor:
+            out.append({"from": float(x[first]), "to": float(x[last]),
+                        "at": float(0.5 * (x[peak] + x[peak + 1])), "gain": gain,
+                        "to_value": float(y[last]), "rows": [int(first), int(last)]})
     return out
 
 

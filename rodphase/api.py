@@ -23,12 +23,12 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from . import config as C
+from . import config
 
 # run_sweep and classify_file, not sweep and classify: those are the names of rodphase's own
 # modules, which would replace the functions as package attributes once imported
 __all__ = ["classify_file", "histories", "load", "load_sweep", "open", "run", "run_sweep",
-           "table"]
+           "table", "trace_boundaries"]
 
 
 def _overrides(overrides, settings: dict) -> list[tuple[str, Any]]:
@@ -38,42 +38,74 @@ def _overrides(overrides, settings: dict) -> list[tuple[str, Any]]:
     elif isinstance(overrides, Mapping):
         items += [(str(k), v) for k, v in overrides.items()]
     elif isinstance(overrides, str):
-        items.append(C.parse_override(overrides))
+        items.append(config.parse_override(overrides))
     elif isinstance(overrides, Iterable):
         for item in overrides:
             if isinstance(item, str):
-                items.append(C.parse_override(item))
+                items.append(config.parse_override(item))
             elif isinstance(item, (tuple, list)) and len(item) == 2:
                 items.append((str(item[0]), item[1]))
             else:
-                raise C.ConfigError("overrides", item, 'a "key=value" string or a (key, value) pair')
+                raise config.ConfigError("overrides", item, 'a "key=value" string or a (key, value) pair')
     else:
-        raise C.ConfigError("overrides", overrides,
+        raise config.ConfigError("overrides", overrides,
                             'a dict, a "key=value" string, or a list of either or of pairs')
     items += [(key.replace("__", "."), value) for key, value in settings.items()]
     return items
 
 
-def load(scene, overrides=None, **settings) -> C.Frozen:
-    """A validated scene config: `scene` is a shipped scene's name, a YAML path, a plain dict
-    (a scene mapping), or a config from an earlier load (then the overrides apply to it)."""
+def load(scene, overrides=None, **settings) -> config.Frozen:
+    """A validated scene config, every default filled in.
+
+    Parameters
+    ----------
+    scene : str, path, mapping or Frozen
+        A shipped scene's name (``rodphase scenes`` lists them), a YAML path, a plain dict
+        (a scene mapping), or a config from an earlier load (the overrides then apply to it).
+    overrides : dict, str, or iterable of (key, value) or "key=value", optional
+        Config values to change, by dotted key: ``{"rod.elements": 60}``.
+    **settings
+        More overrides as keywords, ``__`` for the dots: ``rod__elements=60``.
+
+    Returns
+    -------
+    Frozen
+        The read-only config, sections as attributes (``cfg.rod.elements``).
+
+    Raises
+    ------
+    ConfigError
+        A bad key or value, naming the key, the value and what is allowed.
+    """
     from .restart import checked_initial_state
     from .scenes import SCENES
 
     items = _overrides(overrides, settings)
     if isinstance(scene, Mapping):
-        plain = scene.plain() if isinstance(scene, C.Frozen) else dict(scene)
-        return checked_initial_state(C.validate_scene(C.apply_overrides(plain, items), SCENES))
-    return checked_initial_state(C.load_scene(str(scene), items, SCENES))
+        plain = scene.plain() if isinstance(scene, config.Frozen) else dict(scene)
+        return checked_initial_state(config.validate_scene(config.apply_overrides(plain, items), SCENES))
+    return checked_initial_state(config.load_scene(str(scene), items, SCENES))
 
 
-def load_sweep(sweep, overrides=None, **settings) -> tuple[C.Frozen, C.Frozen]:
-    """(sweep, base scene) from a sweep file or a shipped sweep's name ("quick",
-    "fig3_paper"). Keys under "sweep." change the sweep, all others the scene."""
+def load_sweep(sweep, overrides=None, **settings) -> tuple[config.Frozen, config.Frozen]:
+    """A validated sweep and the scene it samples.
+
+    Parameters
+    ----------
+    sweep : str or path
+        A sweep YAML or a shipped sweep's name (``"quick"``, ``"fig3_paper"``).
+    overrides, **settings
+        As for `load`; keys under ``sweep.`` change the sweep, all others the scene.
+
+    Returns
+    -------
+    tuple of (Frozen, Frozen)
+        The sweep section and the base scene config.
+    """
     from .restart import checked_initial_state
     from .scenes import SCENES
 
-    sweep_cfg, scene_cfg = C.load_sweep(sweep, _overrides(overrides, settings), SCENES)
+    sweep_cfg, scene_cfg = config.load_sweep(sweep, _overrides(overrides, settings), SCENES)
     return sweep_cfg, checked_initial_state(scene_cfg)
 
 
@@ -115,10 +147,31 @@ def _warm_kernel(say=_say) -> None:
 
 
 def run(scene, overrides=None, **settings):
-    """Simulate one scene (see `load` for the arguments) and return its RunResult. A run that
-    goes unstable or does not settle comes back with that status; it does not raise. A run
-    whose snapshots (output.history_interval) would not fit in memory is refused first
-    (ConfigError). The first call compiles the kernel, and says so when that takes long."""
+    """Simulate one scene.
+
+    A run that goes unstable or does not settle comes back with that status; it does not
+    raise. The first call compiles the kernel, and says so when that takes long.
+
+    Parameters
+    ----------
+    scene, overrides, **settings
+        As for `load`. A top-level key goes in as itself:
+        ``initial_state="out/run.h5#run"`` starts from that stored run's final state.
+
+    Returns
+    -------
+    RunResult
+        The final state (``positions`` (n+1, 3) in m, ``directors``, ``radii``), the
+        ``history`` (a dict of columns; ``history_frame`` as a DataFrame), the snapshots,
+        ``status`` (``ok``, ``unstable``, ``not_converged``, ``error``), ``message`` and
+        ``diagnostics``.
+
+    Raises
+    ------
+    ConfigError
+        A bad config, or snapshots (``output.history_interval``) that would not fit in
+        memory; refused before anything runs.
+    """
     from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
 
     cfg = load(scene, overrides, **settings)
@@ -130,15 +183,47 @@ def run(scene, overrides=None, **settings):
 def run_sweep(sweep, output, overrides=None, *, jobs: int | None = None, backend: str = "loky",
               scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
               progress: bool | None = None, **settings):
-    """Run a sweep into the store `output` (resuming it), classify it, and return its table
-    (one row per run: parameters, status, phase, alignment, Lk/Tw/Wr, ...). Runs that failed
-    are in the table with their status. A scene registered at run time (a builder added to
-    rodphase.scenes.SCENES in this session) is sent to the workers with the jobs.
+    """Run a sweep into a store (resuming it), classify it, and return its table.
 
-    jobs: parallel workers (default: this machine's cores). progress: a progress bar and the
-    CLI's messages on stderr (default: on in an interactive session, a notebook or a
-    terminal). replace=True replaces an `output` that holds another config's runs (once the
-    first new run is stored); without it such a store raises StoreMismatch."""
+    Runs that failed are in the table with their status. A scene registered at run time (a
+    builder added to ``rodphase.scenes.SCENES`` in this session) is sent to the workers with
+    the jobs.
+
+    Parameters
+    ----------
+    sweep, overrides, **settings
+        As for `load_sweep`.
+    output : str or path
+        The HDF5 store; a store of the same config is resumed (finished runs skipped).
+    jobs : int, optional
+        Parallel workers; default this machine's cores.
+    backend : {"loky", "dask"}
+        Local processes, or a Dask cluster (``scheduler``; a local one without it).
+    scheduler : str, optional
+        A Dask scheduler's address, ``tcp://host:8786``.
+    retry_failed : bool
+        Run again the runs stored as failed.
+    replace : bool
+        Replace an `output` that holds another config's runs (once the first new run is
+        stored); without it such a store raises StoreMismatch.
+    progress : bool, optional
+        A progress bar and the CLI's messages on stderr; default on in an interactive
+        session, a notebook or a terminal.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run: the sampled parameters, ``status``, ``message``, ``alignment``,
+        ``phase``, final ``link``, ``twist``, ``writhe`` and more (columns and units:
+        the HDF5 format's table).
+
+    Raises
+    ------
+    StoreMismatch
+        `output` holds another config's runs and `replace` is false.
+    KeyboardInterrupt
+        The sweep was stopped by a signal; call again to go on.
+    """
     from .runner import check_jobs_memory
     from .store import StoreMismatch
     from .sweep import plan, run_sweep
@@ -160,9 +245,75 @@ def run_sweep(sweep, output, overrides=None, *, jobs: int | None = None, backend
     return classify_file(output)
 
 
+def trace_boundaries(sweep, output=None, overrides=None, *, only_onset: bool = False,
+               tolerance: float | None = None, twist_tolerance: float | None = None,
+               levels: int | None = None, jobs: int | None = None, backend: str = "loky",
+               scheduler: str | None = None, replace: bool = False,
+               progress: bool | None = None, **settings):
+    """The phase diagram's lines for a sweep's box: the straight rod's onset, the
+    plectoneme–solenoid boundary and the triple point, each with its bracket (as
+    ``rodphase boundaries``; see rodphase.boundaries).
+
+    Parameters
+    ----------
+    sweep, overrides, **settings
+        As for `load_sweep`; the sweep's axes must be twist_density and extension.
+    output : str or path, optional
+        The HDF5 store of the runs the trace places (resumed like any sweep); not needed
+        with `only_onset`.
+    only_onset : bool
+        Only the onset line, from the model's static stability: no runs, nothing stored.
+    tolerance, twist_tolerance, levels : optional
+        The width in L/L0 of a plectoneme–solenoid bracket (0.005), the width in Φa of the
+        triple point's (0.05), the twist levels of the first round (6).
+    jobs, backend, scheduler, replace, progress
+        As for `run_sweep`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per boundary point: ``kind`` (onset, plectoneme_solenoid, triple_point),
+        ``extension``, ``twist_density``, their brackets ``extension_low``/``_high`` and
+        ``twist_density_low``/``_high``, and flags (rodphase.boundaries.COLUMNS);
+        ``attrs["claims"]``: the onset's slope and intercept at high extension with their
+        errors, and the extension from which solenoids win.
+    """
+    from .boundaries import sweep_for_boundaries, trace
+
+    chosen = {"tolerance": tolerance, "twist_tolerance": twist_tolerance, "levels": levels}
+    sweep_cfg, scene_cfg = sweep_for_boundaries(sweep, _overrides(overrides, settings), chosen)
+    if not only_onset and output is None:
+        raise config.ConfigError("output", None, "a store path for the runs (or only_onset)")
+    jobs = max(1, os.cpu_count() or 1) if jobs is None else int(jobs)
+    progress = interactive() if progress is None else bool(progress)
+    if output is not None:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+    found = trace(sweep_cfg, scene_cfg, None if output is None else str(output),
+                  only_onset=only_onset, jobs=jobs, backend=backend, scheduler=scheduler,
+                  progress=progress, echo=_say if progress else lambda _: None,
+                  replace=replace)
+    if found.report is not None and found.report.stopped_by:
+        raise KeyboardInterrupt(f"stopped by {found.report.stopped_by}; call again to go on")
+    found.table.attrs["claims"] = found.claims
+    return found.table
+
+
 def classify_file(path, **thresholds):
-    """Classify every run of a store (epsilon, plectoneme_below, solenoid_above as in
-    `rodphase classify`), store the classification, and return the whole table."""
+    """Classify every run of a store and store the classification in it.
+
+    Parameters
+    ----------
+    path : str or path
+        The store.
+    **thresholds
+        ``epsilon`` (0.2), ``plectoneme_below`` (−0.5), ``solenoid_above`` (0.5),
+        ``separation`` (5 rest radii): as the options of ``rodphase classify``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The whole table, one row per run, with ``alignment`` and ``phase``.
+    """
     from .store import edit_store
     from .tabulate import classify_store
 
@@ -171,22 +322,60 @@ def classify_file(path, **thresholds):
 
 
 def open(path):  # noqa: A001 - rodphase.open(path) reads as the user expects
-    """The store at `path`, open for reading (use as a context manager): run_ids(),
-    read_run(id) → RunResult, table(), histories(columns), attrs."""
+    """Open a store for reading; safe while a sweep writes it.
+
+    Parameters
+    ----------
+    path : str or path
+        The store.
+
+    Returns
+    -------
+    Store
+        Use as a context manager: ``run_ids()``, ``read_run(id)`` → RunResult, ``table()``,
+        ``histories(columns)``, ``attrs``.
+    """
     from .store import read_store
 
     return read_store(path)
 
 
 def table(path):
-    """The per-run table of a store (parameters, status, classification if stored)."""
+    """The per-run table of a store.
+
+    Parameters
+    ----------
+    path : str or path
+        The store.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run: parameters, status, timings, and the classification if stored.
+    """
     from .store import read_table
 
     return read_table(path)
 
 
 def histories(path, columns=None, run_ids=None):
-    """Every run's time history stacked in one long table (see Store.histories)."""
+    """Every run's time history, stacked in one long table.
+
+    Parameters
+    ----------
+    path : str or path
+        The store.
+    columns : list of str, optional
+        History columns to read; default all (a run lacking one gets NaN).
+    run_ids : list of str, optional
+        Runs to read; default all.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per (run, history row), with ``run_id``, the run's parameters and status,
+        and the history columns.
+    """
     from .store import read_histories
 
     return read_histories(path, columns, run_ids)

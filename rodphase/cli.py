@@ -7,13 +7,28 @@ from __future__ import annotations
 
 import functools
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
 import click
 
-from . import config as C
 from ._version import __version__
+from .config import (
+    PACKAGE_CONFIGS,
+    ConfigError,
+    ResolutionWarning,
+    config_hash,
+    earlier_hashes,
+    load_scene,
+    load_sweep,
+    make_output_folder,
+    parse_override,
+    read_yaml,
+    resolve_sweep_path,
+    stored_config,
+    to_yaml,
+)
 
 FORCE_HELP = ("Replace OUTPUT if it holds another config's results (it is replaced when the "
               "first new run is stored, not before). With the same config it changes nothing: "
@@ -36,7 +51,7 @@ def reports_errors(func):
             click.echo(f"error: {exc}. Every run stored before is intact: free some space and "
                        "run the same command to go on.", err=True)
             sys.exit(2)
-        except (C.ConfigError, StoreError, FileNotFoundError, KeyError) as exc:
+        except (ConfigError, StoreError, FileNotFoundError, KeyError) as exc:
             # str(KeyError) quotes its message: print the message itself
             text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
             click.echo(f"error: {text}", err=True)
@@ -46,14 +61,14 @@ def reports_errors(func):
 
 
 def _overrides(items) -> list:
-    return [C.parse_override(item) for item in items]
+    return [parse_override(item) for item in items]
 
 
 def _has_runs(store, store_file) -> list[str]:
     """The store's run ids; a store without any is refused in one line."""
     ids = store.run_ids()
     if not ids:
-        raise C.ConfigError(str(store_file), "no finished runs yet",
+        raise ConfigError(str(store_file), "no finished runs yet",
                             "a store with at least one run (a sweep killed before its first "
                             "run has none; run the same sweep command again)")
     return ids
@@ -64,7 +79,7 @@ def _check_run(store, store_file, run_id: str) -> str:
     ids = _has_runs(store, store_file)
     if run_id not in ids:
         shown = ", ".join(ids) if len(ids) <= 6 else f"{', '.join(ids[:3])}, ..., {ids[-1]}"
-        raise C.ConfigError("--run", run_id, f"a run id of {store_file} ({len(ids)} stored: "
+        raise ConfigError("--run", run_id, f"a run id of {store_file} ({len(ids)} stored: "
                             f"{shown})")
     return run_id
 
@@ -93,6 +108,27 @@ class _OneLineUsageErrors(click.Group):
         sys.exit(code if isinstance(code, int) else 0)
 
 
+def _warn_once_per_key() -> None:
+    """Config warnings (rodphase.config.ResolutionWarning) as one 'warning:' line each on
+    stderr, once per key: a sweep validates every sample, and 200 samples below the same
+    resolution are one thing to say."""
+    import warnings
+
+    said: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, ResolutionWarning):
+            return shown(message, category, filename, lineno, file, line)
+        key = str(message).split(" ", 1)[0]
+        if key not in said:
+            said.add(key)
+            click.echo(f"warning: {message}", err=True)
+
+    shown = warnings.showwarning
+    warnings.showwarning = show
+    warnings.simplefilter("always", ResolutionWarning)
+
+
 @click.group(cls=_OneLineUsageErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="rodphase")
 @click.option("-v", "--verbose", count=True,
@@ -104,6 +140,7 @@ def main(verbose):
     extension L/L0 and writes every run to one HDF5 file, which `classify` labels
     (straight, plectoneme, solenoid, mixed) and `plot` draws.
     """
+    _warn_once_per_key()
     if verbose:
         import logging
 
@@ -129,28 +166,39 @@ def run(scene, output, sets, force):
     from .restart import checked_initial_state
     from .scenes import SCENES
 
-    cfg = checked_initial_state(C.load_scene(scene, _overrides(sets), SCENES))
+    cfg = checked_initial_state(load_scene(scene, _overrides(sets), SCENES))
     from .runner import check_memory, keep_snapshots, run_scene, snapshot_policy
     from .store import open_store
+    from .sweep import Interrupted, interruptible, stop_on_signals
     from .tabulate import classify_store
 
     check_memory(cfg)  # a run whose snapshots cannot fit is refused before it costs anything
-    C.make_output_folder(output)
+    make_output_folder(output)
+    existed = Path(output).exists()
     # the output is opened (locked, its config checked) before simulating: a run that cannot
-    # be written is refused before it costs anything
-    with open_store(output, config_text=C.to_yaml(scene=cfg), config_hash=C.config_hash(cfg),
-                    version=__version__, kind="run", replace=force,
-                    earlier=C.earlier_hashes(cfg)) as store:
-        from .runner import compile_kernel, cpu_seconds
+    # be written is refused before it costs anything. Ctrl-C and SIGTERM stop it as they stop
+    # a sweep (never inside the store's write), and say what was kept
+    with stop_on_signals() as stop:
+        try:
+            with open_store(output, config_text=to_yaml(scene=cfg),
+                            config_hash=config_hash(cfg), version=__version__, kind="run",
+                            replace=force, earlier=earlier_hashes(cfg)) as store:
+                from .runner import compile_kernel, cpu_seconds
 
-        click.echo("Compiling the kernel (once; numba caches it on disk) ...")
-        cpu = cpu_seconds()
-        wall = compile_kernel()  # kept out of the run's own timing
-        click.echo(f"  ready in {wall:.1f} s (CPU {cpu_seconds() - cpu:.1f} s)")
-        click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
-        result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
-        store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
-        table = classify_store(store)
+                click.echo("Compiling the kernel (once; numba caches it on disk) ...")
+                cpu = cpu_seconds()
+                with interruptible():
+                    wall = compile_kernel()  # kept out of the run's own timing
+                click.echo(f"  ready in {wall:.1f} s (CPU {cpu_seconds() - cpu:.1f} s)")
+                click.echo(f"Running {cfg.scene} ({cfg.rod.elements} elements) ...")
+                started = time.perf_counter()
+                with interruptible():
+                    result = keep_snapshots(run_scene(cfg), snapshot_policy(cfg, "all"))
+                store.write_run("run", {}, result, {"wall_time": result.diagnostics["wall_time"]})
+                table = classify_store(store)
+        except Interrupted:
+            _stopped_run(output, existed, stop.signal_name,
+                         time.perf_counter() - started if "started" in locals() else None)
     d = result.diagnostics
     click.echo(f"{result.status}: {result.message}")
     if d.get("dt_asleep") is not None and d.get("contact_woke_at") is None:
@@ -174,6 +222,29 @@ def run(scene, output, sets, force):
     sys.exit(0 if result.ok else 1)
 
 
+def _stopped_run(output, existed: bool, signal_name: str, seconds: float | None) -> None:
+    """A run stopped by a signal: what was kept, how to go on; exit 128 + the signal's
+    number, as a stopped sweep. A run is stored whole or not at all, so a store that this
+    command made holds nothing and is removed."""
+    import signal
+
+    from .store import lock_path, parts_folder
+
+    when = "while compiling" if seconds is None else f"after {seconds:.1f} s of the run"
+    if existed:
+        kept = f"{output} is as it was"
+    else:
+        for leftover in (Path(output), lock_path(output)):
+            leftover.unlink(missing_ok=True)
+        if parts_folder(output).is_dir() and not any(parts_folder(output).iterdir()):
+            parts_folder(output).rmdir()
+        kept = f"{output}, made by this command, was removed"
+    click.echo(f"stopped by {signal_name} {when}: a run is stored only once it has finished, "
+               f"so nothing was stored ({kept}); run the same command to start it again.",
+               err=True)
+    sys.exit(128 + signal.Signals[signal_name].value)
+
+
 def _escapes_line(result) -> str:
     """'link -4.365 of -6.366 turns put in: +2.00 turns in 5 escapes (...)', or "" for a run
     that lost no link: the link alone does not say that some of it left the rod."""
@@ -193,16 +264,26 @@ def _escapes_line(result) -> str:
             f"{count} escape(s) past the ends {detail}").rstrip()
 
 
+def _where_runs_go(command):
+    """--jobs, --backend and --scheduler: the options of every command that runs a sweep."""
+    for option in reversed([
+            click.option("--jobs", "-j", default=2, show_default=True,
+                         type=click.IntRange(1, 4096), help="Parallel workers (processes)."),
+            click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
+                         show_default=True,
+                         help="loky: processes on this machine; dask: a Dask cluster."),
+            click.option("--scheduler", default=None, metavar="ADDRESS",
+                         help="Dask scheduler address (tcp://host:8786); default: a local "
+                         "cluster.")]):
+        command = option(command)
+    return command
+
+
 @main.command()
 @click.argument("sweep_file", metavar="SWEEP.yaml", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="HDF5 file; rerunning into it resumes and skips finished runs.")
-@click.option("--jobs", "-j", default=2, show_default=True, type=click.IntRange(1, 4096),
-              help="Parallel workers (processes).")
-@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky",
-              show_default=True, help="loky: processes on this machine; dask: a Dask cluster.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Dask scheduler address (tcp://host:8786); default: a local cluster.")
+@_where_runs_go
 @click.option("--reconnect-timeout", default="120", show_default=True, metavar="SECONDS",
               help="Dask: how long to wait for a lost scheduler to answer again (then the runs "
               "in flight are sent again), or for a worker once every worker has left.")
@@ -230,7 +311,10 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     from .scenes import SCENES
     from .sweep import ClusterLost, plan, run_sweep
 
-    sweep_cfg, scene_cfg = C.load_sweep(sweep_file, _overrides(sets), SCENES)
+    sweep_cfg, scene_cfg = load_sweep(sweep_file, _overrides(sets), SCENES)
+    if sweep_cfg.sampler == "boundaries":
+        raise ConfigError("sweep.sampler", "boundaries", "a sampler of points; the boundaries "
+                          "sampler places its runs by bracketing: rodphase boundaries")
     checked_initial_state(scene_cfg)
     check_jobs_memory(plan(sweep_cfg, scene_cfg), jobs)
     try:
@@ -243,7 +327,9 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
                            scheduler=scheduler, retry_failed=retry_failed, replace=force,
                            # a bar's carriage returns garble a log file (batch jobs, CI)
                            progress=not quiet and sys.stderr.isatty(), echo=click.echo,
-                           reconnect_timeout=patience)
+                           reconnect_timeout=patience,
+                           # without a terminal (nohup, CI), a line at a steady pace instead
+                           lines=None if quiet or sys.stderr.isatty() else click.echo)
     except ClusterLost as exc:
         import shlex
 
@@ -263,14 +349,103 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
     by_status = Counter(status for _, status, _ in report.failures)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(by_status.items())) or "0 failed"
     compiled = f" (+ {report.compile_time:.1f} s compiling)" if report.compile_time else ""
-    click.echo(f"{report.done} ok, {counts}, {report.skipped} skipped of {report.total} in "
-               f"{report.wall:.1f} s{compiled}; written to {output}")
-    for run_id, status, message in report.failures:
+    this_time = "this time: " if report.skipped else ""
+    click.echo(f"{this_time}{report.done} ok, {counts}, {report.skipped} skipped of "
+               f"{report.total} in {report.wall:.1f} s{compiled}; written to {output}")
+    failures = list(report.failures)
+    if report.skipped:
+        # a resumed sweep: the runs skipped count too (a failed one is skipped, not retried)
+        stored, earlier = _stored_summary(output, {rid for rid, _, _ in failures})
+        click.echo(stored)
+        failures += earlier
+        by_status.update(status for _, status, _ in earlier)
+    for run_id, status, message in failures:
         click.echo(f"  {run_id}: {status}: {message}")
     if by_status.get("not_converged"):
         click.echo("  (a not_converged run keeps its final shape: it is classified, and its "
                    "status says the hold ran out of time)")
-    sys.exit(0 if report.failed == 0 else 1)
+    if failures and report.skipped and not retry_failed:
+        click.echo("  (failed runs are kept and skipped; --retry-failed runs them again)")
+    sys.exit(0 if not failures else 1)
+
+
+def _stored_summary(output, listed: set[str]) -> tuple[str, list[tuple[str, str, str]]]:
+    """'OUT holds N runs: 39 ok, 1 unstable' and the failed runs stored before (those not in
+    `listed`), as (run id, status, message)."""
+    from .store import read_store
+
+    with read_store(output) as store:
+        table = store.table()
+    counts = Counter(table["status"]) if len(table) else Counter()
+    earlier = [(str(row.run_id), str(row.status), str(row.message).splitlines()[-1]
+                if str(row.message) else "") for row in table.itertuples()
+               if row.status != "ok" and str(row.run_id) not in listed]
+    text = ", ".join(f"{n} {status}" for status, n in sorted(counts.items())) or "no runs"
+    return f"{output} holds {len(table)} runs: {text}", earlier
+
+
+@main.command()
+@click.argument("sweep_file", metavar="SWEEP.yaml", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="HDF5 file of the runs the trace places (an ordinary sweep store, with the "
+              "boundaries kept under /boundaries); rerunning into it resumes.")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
+              help="Also write the boundaries as CSV: one row per boundary point (kind, "
+              "extension, twist_density and their brackets).")
+@click.option("--only", type=click.Choice(["onset"]), default=None,
+              help="onset: only the straight rod's onset line, from the model's static "
+              "stability (seconds, no runs, nothing stored).")
+@click.option("--tolerance", type=float, default=None,
+              help="Width in L/L0 of a plectoneme-solenoid bracket [default 0.005].")
+@click.option("--twist-tolerance", type=float, default=None,
+              help="Width in Phi*a of the triple point's bracket [default 0.05].")
+@click.option("--levels", type=int, default=None,
+              help="Twist levels of the first round, spread over the box [default 6].")
+@_where_runs_go
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+@reports_errors
+def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, levels, jobs,
+               backend, scheduler, sets, quiet, force):
+    """Trace the phase diagram's lines: the straight rod's onset, the plectoneme-solenoid
+    boundary and the triple point, each with its bracket.
+
+    The sweep's axes (twist_density Phi*a and extension L/L0) give the box, its scene and
+    `set` the rod and protocol; its sampler and samples do not apply. The onset comes from
+    the model's own stability (no dynamics); the boundary from runs of the scene's protocol
+    placed by bisection along lines of constant twist, until each bracket is narrower than
+    --tolerance in L/L0.
+
+    \b
+    Example:
+      rodphase boundaries fig3_paper -o out/fig3_lines.h5 --csv out/fig3_lines.csv
+      rodphase boundaries fig3_paper -o out/onset.h5 --only onset --set rod.radius=0.0125
+    """
+    from .boundaries import summary, sweep_for_boundaries, trace
+
+    settings = {"tolerance": tolerance, "twist_tolerance": twist_tolerance, "levels": levels}
+    sweep_cfg, scene_cfg = sweep_for_boundaries(sweep_file, _overrides(sets), settings)
+    found = trace(sweep_cfg, scene_cfg, output, only_onset=only == "onset", jobs=jobs,
+                  backend=backend, scheduler=scheduler, echo=click.echo, replace=force,
+                  progress=not quiet and sys.stderr.isatty())
+    if found.report is not None and found.report.stopped_by:
+        import signal
+
+        click.echo(f"stopped by {found.report.stopped_by}: the runs finished so far are "
+                   f"stored in {output}; run the same command to go on.", err=True)
+        sys.exit(128 + signal.Signals[found.report.stopped_by].value)
+    click.echo(summary(found))
+    if found.report is None:
+        click.echo(f"onset line in {found.onset_seconds:.2f} CPU s (no runs)")
+    else:
+        r = found.report
+        click.echo(f"{r.done} runs ok, {r.failed} failed, {r.skipped} reused of {r.total} in "
+                   f"{r.wall:.1f} s; runs and boundaries in {output}")
+    if csv_path:
+        make_output_folder(csv_path)
+        found.table.to_csv(csv_path, index=False, float_format="%.10g")
+        click.echo(f"boundaries: {csv_path}")
 
 
 @main.command()
@@ -317,7 +492,7 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above, se
     counts = table["phase"].value_counts().to_dict()
     click.echo(f"{len(table)} runs: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     if csv_path:
-        C.make_output_folder(csv_path)
+        make_output_folder(csv_path)
         write_table_csv(table, csv_path)
         click.echo(f"table written to {csv_path} (units and meanings of its columns in "
                    f"{csv_path}-metadata.json)")
@@ -355,8 +530,8 @@ def classify(store_file, csv_path, epsilon, plectoneme_below, solenoid_above, se
               help="Phase map: the straight rod's buckling twist along L/L0, the model's own "
                    "(from its stiffness, at the sweep's resolution), the sheared and the unsheared "
                    "clamped Greenhill twist (for a rod clamped at both ends under an end load), "
-                   "and the measured critical twist per extension bin with its straight-line "
-                   "fit above L/L0 = 1.1.")
+                   "and the boundaries `rodphase boundaries` traced into the store (the "
+                   "plectoneme-solenoid line with its bracket, the triple point).")
 @reports_errors
 def plot(store_file, kind, output, run_id, experiments, twist, background, size, caption,
          theory):
@@ -367,22 +542,22 @@ def plot(store_file, kind, output, run_id, experiments, twist, background, size,
       rodphase plot out/quick.h5 --kind phase --size column -o phase.pdf
       rodphase plot out/quick.h5 --kind topology --run run-00003 -o lk.png
     """
-    C.make_output_folder(output)
+    make_output_folder(output)
     if size is not None and size not in ("column", "page"):
         try:
             width, height = (float(v) for v in size.split(","))
             size = (width, height)
         except ValueError:
-            raise C.ConfigError("--size", size, "column, page, or width,height in inches "
+            raise ConfigError("--size", size, "column, page, or width,height in inches "
                                 "(e.g. 3.4,3)") from None
     try:
         _draw(store_file, kind, output, run_id, experiments, twist, background, size, caption,
               theory)
-    except C.ConfigError:
+    except ConfigError:
         raise  # already names what was given and what is allowed
     except ValueError as exc:
         # a figure that this file's data cannot make (say why, no traceback)
-        raise C.ConfigError(f"--kind {kind}", store_file, str(exc)) from None
+        raise ConfigError(f"--kind {kind}", store_file, str(exc)) from None
     click.echo(f"written {output}")
 
 
@@ -421,7 +596,7 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
           theory=True):
     import pandas as pd
 
-    from . import plot as P
+    from . import plot as plots
     from .store import read_store
 
     with read_store(store_file) as store:
@@ -433,8 +608,8 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             exp = pd.read_csv(experiments) if experiments else None
             column = "phi_a_current" if twist == "current" else (
                 "twist_density" if "twist_density" in table else "phi_a_rest")
-            config = C.stored_config(store.attrs.get("config_yaml", ""))
-            text = P.sweep_caption(config, table) if caption else None
+            config = stored_config(store.attrs.get("config_yaml", ""))
+            text = plots.sweep_caption(config, table) if caption else None
             lines = None
             if theory and "extension" in table and table["extension"].notna().any():
                 from .tabulate import onset_lines
@@ -443,14 +618,9 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
                 # 13 points (an onset each): phase_map draws a spline through them
                 lines = onset_lines(config, [e.min() + (e.max() - e.min()) * i / 12
                                              for i in range(13)])
-            critical = None
-            if theory and {"extension", "phase", column} <= set(table.columns):
-                from .tabulate import critical_twist
-
-                critical = critical_twist(table.assign(extension=table["extension"].astype(float)),
-                                          column)
-            P.phase_map(table, output, experiments=exp, twist=column, caption=text, size=size,
-                        onset=lines, critical=critical)
+            traced = store.boundaries() if theory else None
+            plots.phase_map(table, output, experiments=exp, twist=column, caption=text,
+                            size=size, onset=lines, lines=traced)
         elif kind == "path":
             from .tabulate import path_table
 
@@ -464,32 +634,32 @@ def _draw(store_file, kind, output, run_id, experiments, twist, background, size
             if background:
                 with read_store(background) as other:
                     behind = _classified_table(other, _has_runs(other, background))
-            P.phase_path(paths, output, background=behind)
+            plots.phase_path(paths, output, background=behind)
         elif kind == "shape":
             table = store.table()
-            ids = [run_id] if run_id else P.shape_panels(table)
+            ids = [run_id] if run_id else plots.shape_panels(table)
             shapes = []
             for rid in ids:
                 result = store.read_run(rid)
-                shapes.append((P.run_label(table.set_index("run_id").loc[rid]),
+                shapes.append((plots.run_label(table.set_index("run_id").loc[rid]),
                                result.positions, result.rest_radius))
-            P.shape_grid(shapes, output)
+            plots.shape_grid(shapes, output)
         else:
             rid = run_id or _run_with_history(store, ids)
             result = store.read_run(rid)
             if kind in ("topology", "force") and len(result.history["time"]) < 2:
-                raise C.ConfigError("--run", rid, "a run with a history of two rows or more "
+                raise ConfigError("--run", rid, "a run with a history of two rows or more "
                                     f"to draw its {kind} curves: this one has one row (a run "
                                     "started on its straight equilibrium that settled at once)")
-            params = P.params_text(store.run_params(rid))
+            params = plots.params_text(store.run_params(rid))
             if kind == "topology":
-                P.topology_curves(result, output, title=f"{rid}: {params}" if params else rid)
+                plots.topology_curves(result, output, title=f"{rid}: {params}" if params else rid)
             elif kind == "hat":
-                P.hat_curve(result, output)
+                plots.hat_curve(result, output)
             elif kind == "response":
-                P.control_response(result, output)
+                plots.control_response(result, output)
             else:
-                P.force_displacement(result.history, output)
+                plots.force_displacement(result.history, output)
 
 
 @main.command()
@@ -511,26 +681,26 @@ def movie(store_file, run_id, output, fps, height):
     """
     import shutil
 
-    from . import plot as P
+    from . import plot as plots
     from .store import read_store
 
     if Path(output).suffix.lower() != ".gif" and shutil.which("ffmpeg") is None:
         # writing a GIF under another name (or beside it) would surprise: say it instead
-        raise C.ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
+        raise ConfigError("--output", output, "a .gif file, or an .mp4 once ffmpeg is "
                             "installed (apt install ffmpeg, conda install ffmpeg)")
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
     if len(result.snapshot_positions) < 2:
-        raise C.ConfigError("--run", run_id, "a run with two snapshots or more to animate: "
+        raise ConfigError("--run", run_id, "a run with two snapshots or more to animate: "
                             f"this one kept {len(result.snapshot_positions)} (a sweep keeps the "
                             "final state only; run it with --set output.snapshots=all)")
-    C.make_output_folder(output)
+    make_output_folder(output)
     from .analysis import twist_density
 
     h = result.history
     rows = result.snapshot_history_rows
     phi_a = twist_density(result)[rows] if "end_rotation" in h else None
-    path = P.movie(result.snapshot_positions, result.rest_radius, output, fps=fps,
+    path = plots.movie(result.snapshot_positions, result.rest_radius, output, fps=fps,
                    times=h["time"][rows], twist_density=phi_a, height=height)
     click.echo(f"written {path}")
 
@@ -554,7 +724,7 @@ def export(store_file, run_id, output, snapshots):
     from .export import write_vtk, write_vtk_series
     from .store import read_store
 
-    C.make_output_folder(output)
+    make_output_folder(output)
     with read_store(store_file) as store:
         result = store.read_run(_check_run(store, store_file, run_id))
     if snapshots:
@@ -581,16 +751,45 @@ def config(name, sets):
     from .scenes import SCENES
 
     try:
-        path = C.resolve_sweep_path(name)
-        is_sweep = "sweep" in C.read_yaml(path)
-    except C.ConfigError:
+        path = resolve_sweep_path(name)
+        is_sweep = "sweep" in read_yaml(path)
+    except ConfigError:
         is_sweep = False
+    overrides = _overrides(sets)
     if is_sweep:
-        sweep_cfg, scene_cfg = C.load_sweep(path, _overrides(sets), SCENES)
-        click.echo(C.to_yaml(sweep=sweep_cfg, scene=checked_initial_state(scene_cfg)), nl=False)
+        from .config import Frozen
+
+        sweep_cfg, scene_cfg = load_sweep(path, overrides, SCENES)
+        checked_initial_state(scene_cfg)
+        click.echo(_origins(sweep_cfg["set"], overrides), nl=False)
+        # a value of sweep.set that --set replaces is shown once, where it is in force
+        replaced = {k for k, _ in overrides if not k.startswith("sweep.")}
+        shown = Frozen({**sweep_cfg, "set": Frozen(
+            {k: v for k, v in sweep_cfg["set"].items() if k not in replaced})})
+        click.echo(to_yaml(sweep=shown, scene=scene_cfg), nl=False)
     else:
-        scene_cfg = checked_initial_state(C.load_scene(name, _overrides(sets), SCENES))
-        click.echo(C.to_yaml(scene=scene_cfg), nl=False)
+        scene_cfg = checked_initial_state(load_scene(name, overrides, SCENES))
+        click.echo(_origins({}, overrides), nl=False)
+        click.echo(to_yaml(scene=scene_cfg), nl=False)
+
+
+def _origins(sweep_set, overrides) -> str:
+    """YAML comments saying which scene values come from sweep.set and --set, rather than
+    from the scene file or the defaults ("" if none do)."""
+    lines = []
+    given = dict(overrides)
+    for key, value in sweep_set.items():
+        if key in given:
+            lines.append(f"#   {key}: {given[key]!r} from --set (replacing sweep.set's "
+                         f"{value!r})")
+        else:
+            lines.append(f"#   {key}: {value!r} from sweep.set")
+    lines += [f"#   {key}: {value!r} from --set" for key, value in given.items()
+              if key not in sweep_set]
+    if not lines:
+        return ""
+    return "# set on top of the config files (their other values are the files' or defaults):\n" + (
+        "\n".join(lines) + "\n")
 
 
 @main.command()
@@ -607,7 +806,7 @@ def scenes():
 
     import yaml
 
-    root = C.PACKAGE_CONFIGS
+    root = PACKAGE_CONFIGS
     width = max(shutil.get_terminal_size((100, 24)).columns, 60)
     for path in sorted((root / "scenes").glob("*.yaml")) + sorted(root.glob("*.yaml")):
         data = yaml.safe_load(path.read_text()) or {}

@@ -225,7 +225,12 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
     "rod": {
         "length": (number(0, strict_min=True, unit="m"), 1.0),
         "radius": (number(0, strict_min=True, unit="m"), 0.025),
-        "elements": (number(4, 5000, integer=True), 100),
+        # auto: from the rod and its twist (resolved_elements); an integer is kept as given
+        "elements": (auto_or(number(4, 5000, integer=True)), "auto"),
+        # what rod.elements: auto aims at: elements this many rest radii long, or shorter
+        "element_length": (number(0.05, 5, unit="rest radii (used by rod.elements: auto)"), 0.5),
+        # how the elements in force were chosen; set by validation (and by --set rod.elements)
+        "elements_from": (choice("auto", "given"), "given"),
         "density": _engine("Rod", "density"),
         "imperfection": (number(0, 1, unit="rest curvature x L0 (RMS, random)"), 1e-3),
         "seed": (number(0, integer=True), 0),
@@ -314,6 +319,10 @@ SCENE_SCHEMA: dict[str, dict[str, tuple[Check, Any]]] = {
         "max_steps": (number(1, integer=True, nullable=True), None),
         # a run stopped as under-resolved is run again with twice the elements, up to this
         "refine_up_to": (number(0, integer=True, unit="elements; 0 = never refine"), 0),
+        # the same as a number of doublings of rod.elements (1: up to twice the scene's), so
+        # that the limit follows the rod; the larger of the two limits holds
+        "refinements": (number(0, 6, integer=True, unit="doublings of rod.elements; 0 = none"),
+                        0),
         # a refined run goes on from a second before the trip ("trip") or starts over
         "refine_from": (choice("trip", "start"), "trip"),
         # a run still stopped (clamp lag, resolution, shear) while an end turns is run again
@@ -402,14 +411,38 @@ SWEEP_SCHEMA: dict[str, tuple[Check, Any]] = {
     "scene": (text, REQUIRED),
     "set": (None, {}),
     "axes": (None, REQUIRED),
-    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive", "paths"),
-                "random"),
+    "sampler": (choice("random", "lhs", "sobol", "grid", "continuation", "adaptive", "paths",
+                       "boundaries"), "random"),
     "samples": (number(1, 100000, integer=True), 12),
     "seed": (number(0, integer=True), 0),
     # the paths sampler's count of columns (loads); null: the square root of samples. Only
     # kept when given, so that no other sweep's hash moves
     "columns": (number(1, 100000, integer=True, nullable=True), None),
+    # the boundaries sampler's settings (rodphase boundaries, boundaries.Settings); only kept
+    # when given, so that no other sweep's hash moves
+    "boundary": (lambda path, value: boundary_settings(path, value), None),
 }
+
+BOUNDARY_SCHEMA: dict[str, Check] = {
+    "tolerance": number(1e-4, 0.1, strict_min=False, unit="L/L0, the width of a "
+                        "plectoneme-solenoid bracket"),
+    "twist_tolerance": number(1e-3, 1.0, unit="Phi*a, the width of the triple point's bracket"),
+    "levels": number(2, 40, integer=True, unit="twist levels of the first round"),
+}
+
+
+def boundary_settings(path: str, value: Any) -> Frozen | None:
+    """sweep.boundary: a mapping of BOUNDARY_SCHEMA's keys, each checked."""
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise ConfigError(path, value, "a mapping of " + ", ".join(BOUNDARY_SCHEMA))
+    out = {}
+    for key, item in value.items():
+        if key not in BOUNDARY_SCHEMA:
+            raise _unknown(f"{path}.", key, BOUNDARY_SCHEMA, item)
+        out[key] = BOUNDARY_SCHEMA[key](f"{path}.{key}", item)
+    return Frozen(out)
 
 # sweep axes in the paper's dimensionless units and where they go in the scene
 AXES = {
@@ -424,9 +457,12 @@ AXES = {
 def _unknown(path: str, key: str, known, value) -> ConfigError:
     """A key that is not one of `known`: its path and the value given to it, and the keys
     allowed there (the nearest first, if one is near)."""
-    close = difflib.get_close_matches(key, list(known), n=1)
+    named = isinstance(key, str) and key.isprintable() and key.strip() and key == key.strip()
+    close = difflib.get_close_matches(key, list(known), n=1) if named else []
     hint = f"; did you mean '{close[0]}'?" if close else ""
-    return ConfigError(f"{path}{key}", value, "a known key, one of " + ", ".join(known) + hint)
+    # an empty, blank, multi-line or non-text key (`"": 1`, `null: 1`, `3: 1`): as written
+    return ConfigError(f"{path}{key if named else repr(key)}", value,
+                       "a known key, one of " + ", ".join(known) + hint)
 
 
 def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
@@ -437,14 +473,20 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
         if key not in SCENE_KEYS:
             raise _unknown("", key, SCENE_KEYS, raw[key])
     name = raw.get("scene")
-    if registered is not None and name not in registered:
+    # a list or a mapping is no scene name (and `in` a dict of names would raise TypeError)
+    if registered is not None and (not isinstance(name, str) or name not in registered):
         raise ConfigError("scene", name, "one of " + ", ".join(sorted(registered)))
-    out: dict[str, Any] = {"scene": text("scene", name),
-                           "description": raw.get("description", "")}
+    description = raw.get("description")
+    if description is not None and not isinstance(description, str):
+        # kept as given it would carry a NaN, a list or a mapping into the stored config
+        raise ConfigError("description", description, "text, a sentence saying what the "
+                          "scene is")
+    out: dict[str, Any] = {"scene": text("scene", name), "description": description or ""}
     if "initial_state" in raw:
         out["initial_state"] = initial_state("initial_state", raw["initial_state"])
     for section, fields in SCENE_SCHEMA.items():
-        given = raw.get(section) or {}
+        given = raw.get(section)
+        given = {} if given is None else given  # `rod:` alone; but not [], 0 or "" for one
         if not isinstance(given, dict):
             raise ConfigError(section, given, "a mapping of " + ", ".join(fields))
         values = {}
@@ -459,7 +501,71 @@ def validate_scene(raw: Any, registered: dict | None = None) -> Frozen:
                 values[key] = default.value() if isinstance(default, EngineDefault) else default
         out[section] = Frozen(values)
     _check_scene_consistency(out)
+    out["rod"] = _with_elements(out)  # warns: only once the scene is known to be valid
     return Frozen(out)
+
+
+# ---------------------------------------------------------------- resolution
+
+class ResolutionWarning(UserWarning):
+    """rod.elements was given below what the scene needs (the CLI prints it as a warning)."""
+
+
+# A straight rod twisted by more than this between neighbouring elements is close to the
+# kernel's 135° resolution guard (which counts bend and twist together) before it bends at
+# all: rod.elements: auto keeps 45° below the guard, and fewer elements than 120° per
+# element (15° below it) draw a warning.
+AUTO_TWIST_PER_ELEMENT = math.pi / 2
+LEAST_TWIST_PER_ELEMENT = 2 * math.pi / 3
+
+
+def elements_needed(cfg: dict) -> tuple[int, int, str]:
+    """(auto, least, why) for the scene's rod: `auto` the elements rod.elements: auto takes,
+    the largest of its slenderness over rod.element_length (L0/(h·a0) elements h rest radii
+    long), AUTO_TWIST_PER_ELEMENT of its largest twist, and 8; `least` what a given count
+    must reach without a warning: elements no longer than the radius (L0/a0) where contact
+    is on, LEAST_TWIST_PER_ELEMENT of the twist, and 4; `why` says which decides."""
+    rod = cfg["rod"]
+    slender = rod.length / rod.radius
+    turns = abs(twist_turns(cfg)) if cfg.get("loading") else 0.0
+    angle = units.TURN * turns  # rad of end rotation over the whole rod
+    by_length = math.ceil(slender / rod.element_length - 1e-9)
+    by_twist = math.ceil(angle / AUTO_TWIST_PER_ELEMENT - 1e-9)
+    auto = max(by_length, by_twist, 8)
+    contact = bool(cfg["physics"].self_contact)
+    least_length = math.ceil(slender - 1e-9) if contact else 0
+    least_twist = math.ceil(angle / LEAST_TWIST_PER_ELEMENT - 1e-9)
+    least = max(least_length, least_twist, 4)
+    why = (f"L0/a0 = {slender:.4g}" + (" with self-contact (elements no longer than the "
+                                        "radius)" if contact else "")
+           + f"; {turns:.3g} turns of twist ({math.degrees(LEAST_TWIST_PER_ELEMENT):.0f}° "
+           f"per element at most, the resolution guard trips at 135°)")
+    return min(auto, 5000), least, why
+
+
+def _with_elements(cfg: dict) -> Frozen:
+    """The rod section with rod.elements in force: rod.elements: auto resolved by
+    elements_needed (again at every validation, so that a sweep axis or --set that changes
+    the radius, length or twist changes it), a given count kept (with a ResolutionWarning
+    below what the scene needs). rod.elements_from says which."""
+    import warnings
+
+    rod = dict(cfg["rod"])
+    # elements_from: auto with a count is a resolved config read back (plain()): the count
+    # was auto's, and is recomputed for the rod as it is now
+    auto = rod["elements"] == "auto" or rod["elements_from"] == "auto"
+    rod["elements_from"] = "auto" if auto else "given"
+    if auto:
+        rod["elements"] = 8  # a placeholder for elements_needed, which does not read it
+    probe = dict(cfg, rod=Frozen(rod))
+    wanted, least, why = elements_needed(probe)
+    if auto:
+        rod["elements"] = wanted
+    elif rod["elements"] < least:
+        warnings.warn(f"rod.elements = {rod['elements']} is below the {least} this rod needs "
+                      f"({why}); rod.elements: auto would take {wanted}", ResolutionWarning,
+                      stacklevel=3)
+    return Frozen(rod)
 
 
 def _check_scene_consistency(cfg: dict) -> None:
@@ -531,6 +637,14 @@ def twist_turns(cfg) -> float:
     return 0.0
 
 
+def refine_limit(cfg) -> int:
+    """The most elements a run of `cfg` may be refined to: solver.refine_up_to, or
+    rod.elements doubled solver.refinements times, whichever is larger (rod.elements alone:
+    no refinement)."""
+    doubled = cfg["rod"].elements * 2 ** cfg["solver"].refinements
+    return max(cfg["solver"].refine_up_to, doubled)
+
+
 def straight_extension(cfg) -> float:
     """L/L0 of the straight rod under the scene's constant load (1 without one)."""
     return units.extension_under_load(cfg["material"].youngs_modulus, cfg["rod"].radius,
@@ -594,6 +708,8 @@ def stored_config(text: str) -> dict:
     """The resolved config a store carries (its config_yaml attribute), read with the same
     strict loader as config files (a file from elsewhere may hold an alias bomb); {} when it
     is not a YAML mapping."""
+    if not isinstance(text, str):
+        return {}  # an attribute of another type (a damaged file, another program's)
     try:
         data = _yaml(text or "")
     except yaml.YAMLError:
@@ -615,13 +731,21 @@ def parse_override(item: str) -> tuple[str, Any]:
     try:
         parsed = _yaml(value)
     except yaml.YAMLError as exc:
-        raise ConfigError(key, value, f"a YAML value ({getattr(exc, 'problem', exc)})") from None
+        # a ReaderError (a control character) has no .problem and a two-line str: one line
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(key, value, f"a YAML value ({problem})") from None
     return key, parsed
 
 
 def apply_overrides(data: dict, overrides: dict[str, Any] | list[tuple[str, Any]]) -> dict:
     data = copy.deepcopy(data)
-    items = overrides.items() if isinstance(overrides, dict) else overrides
+    items = list(overrides.items() if isinstance(overrides, dict) else overrides)
+    # setting rod.elements says how it is chosen: a count is given, auto is auto (a resolved
+    # config carries rod.elements_from, which would otherwise keep the old choice)
+    for key, value in list(items):
+        if key in ("rod.elements", "scene.rod.elements"):
+            items.append((key.rsplit(".", 1)[0] + ".elements_from",
+                          "auto" if value in ("auto", None) else "given"))
     for key, value in items:
         node = data
         parts = key.split(".")
@@ -729,10 +853,76 @@ def load_sweep(path: str | Path, overrides=(), registered=None) -> tuple[Frozen,
         # the axis replaces whatever the scene said about the same control
         section = AXES[axis][1].split(".")[0]
         scene_raw.setdefault(section, {})
+        if not isinstance(scene_raw[section], dict):
+            continue  # --set loading=nan: validate_scene refuses it, naming the section
         for other in _axis_controls(axis):
             if other != AXES[axis][1]:
                 scene_raw[section].pop(other.split(".")[1], None)
-    return sweep, validate_scene(scene_raw, registered)
+    scene = validate_scene(scene_raw, registered)
+    check_onset_reach(sweep, scene)
+    return sweep, scene
+
+
+# Issue #47 item 4. The extension axis goes to L/L0 = 2 and the twist axis to |Φa| = 3, but
+# the straight rod's buckling twist passes Φa = 3 near L/L0 = 1.48: above it a sweep finds
+# only straight rods. Widening the twist range does not help: measured with Fig 3's settings
+# (n = 80, refined to 160, quasi-static start at 0.8 of the onset, slow-down to 0.25 turns/s),
+# a run just past the onset buckles into a solenoid at L/L0 = 1.3 (Φa = 2.5), but at
+# L/L0 = 1.4, 1.45, 1.5, 1.7, 1.8, 1.9 and 2.0 (Φa = 2.9 ... 6.0, each 4-13 % past its onset)
+# it stops unstable (an element sheared past 45°, or the end frame lagging its clamp), while
+# the straight rod below the onset runs to equilibrium (L/L0 = 2, Φa = 4.9). So the twist
+# range stays, and a twist-density sweep whose extension axis goes past what that range can
+# buckle is refused, saying so.
+def check_onset_reach(sweep: Frozen, scene: Frozen) -> None:
+    """Refuse a sweep over twist_density and extension whose extension axis goes past the
+    L/L0 at which the straight rod's buckling twist passes the largest twist density allowed
+    (TWIST_DENSITY_RANGE): no sample there could buckle, whatever the twist axis. The
+    buckling twist is the sheared clamped Greenhill twist of the scene's rod (the model's own
+    onset for many elements; at n = 80 that is 1-5 % lower), checked for a rod clamped at
+    both ends under an end load (other scenes are not)."""
+    if "twist_density" not in sweep.axes or "extension" not in sweep.axes:
+        return
+    onset = _onset_twist_density(scene)
+    top = TWIST_DENSITY_RANGE[1]
+    low, high = sweep.axes["extension"]
+    try:
+        if onset is None or onset(high) <= top:
+            return
+        a, b = 1.0, high  # the onset grows with the extension: bisect for where it is `top`
+        for _ in range(40):
+            a, b = ((a + b) / 2, b) if onset((a + b) / 2) <= top else (a, (a + b) / 2)
+        at_high = onset(high)
+    except ValueError:  # no onset line for this rod (tension at its shear stiffness)
+        return
+    raise ConfigError("sweep.axes.extension", [low, high], (
+        f"a high end of at most L/L0 = {a:.3g} with a twist_density axis: above it the "
+        f"straight rod's buckling twist passes Phi*a = {top:g}, the largest twist density "
+        f"allowed (it is {at_high:.3g} at L/L0 = {high:g}), so no sample there could buckle; "
+        "the twist range is not wider because past the onset above L/L0 ~ 1.4 the model's "
+        "rod stops unstable (sheared past its guards) instead of buckling"))
+
+
+def _onset_twist_density(scene: Frozen):
+    """e ↦ the sheared clamped Greenhill twist of the scene's straight rod stretched to e, as
+    the rest Φa; None for a scene other than a rod clamped at both ends under an end load
+    with the paper's incompressible law."""
+    from .rod.model import Rod
+    from .rod.onset import sheared_greenhill_turns
+
+    ends, material, rod_cfg = scene["ends"], scene["material"], scene["rod"]
+    if not (ends.start == "clamped" and ends.end_axial == "force" and ends.end_lateral == "held"
+            and ends.end_rotation == "held" and material.incompressible
+            and material.law == "paper"):
+        return None
+    rod = Rod(length=rod_cfg.length, radius=rod_cfg.radius, elements=rod_cfg.elements,
+              youngs_modulus=material.youngs_modulus, shear_modulus=None
+              if material.shear_modulus == "auto" else material.shear_modulus,
+              bend_stiffness_given=material.bend_stiffness,
+              twist_stiffness_given=material.twist_stiffness,
+              shear_stiffness_given=material.shear_stiffness,
+              axial_stiffness_given=material.axial_stiffness)
+    to_phi = units.TURN * rod.radius / rod.length
+    return lambda e: sheared_greenhill_turns(rod, e) * to_phi
 
 
 def _axis_controls(axis: str) -> tuple[str, ...]:
@@ -777,6 +967,10 @@ def validate_sweep(raw: Any) -> Frozen:
     if "extension" in checked and "force_multiple" in checked:
         raise ConfigError("sweep.axes.force_multiple", checked["force_multiple"],
                           "not together with extension (both set the load)")
+    if out.get("boundary") is None:
+        out.pop("boundary", None)
+    elif out["sampler"] != "boundaries":
+        raise ConfigError("sweep.boundary", out["boundary"], "only with sweep.sampler: boundaries")
     if out["columns"] is None:
         del out["columns"]
     elif out["sampler"] != "paths":
@@ -824,7 +1018,13 @@ HASH_NEUTRAL: dict[tuple[str, str], Any] = {
     ("solver", "slow_down_to"): 0.0,
     # the contact thinning force made optional (issue #29): on by default, so no hash moved
     ("contact", "thinning_force"): True,
+    # refinement as doublings (issue #46): off by default, so no hash moved
+    ("solver", "refinements"): 0,
 }
+
+# keys that say how a value in force was chosen, not what runs (issue #46: rod.elements: auto
+# resolves to a count, and the count is hashed): left out of every hash
+HASH_OMITTED = {("rod", "element_length"), ("rod", "elements_from")}
 
 
 def _hash_view(part: dict) -> dict:
@@ -833,7 +1033,8 @@ def _hash_view(part: dict) -> dict:
     for section, values in part.items():
         if isinstance(values, dict):
             values = {k: v for k, v in values.items()
-                      if not ((section, k) in HASH_NEUTRAL and HASH_NEUTRAL[section, k] == v)}
+                      if not ((section, k) in HASH_NEUTRAL and HASH_NEUTRAL[section, k] == v)
+                      and (section, k) not in HASH_OMITTED}
         out[section] = values
     return out
 
@@ -868,3 +1069,138 @@ def earlier_hashes(*parts: Frozen) -> dict[str, int]:
 
 def to_yaml(**parts: Frozen) -> str:
     return yaml.safe_dump({k: v.plain() for k, v in parts.items()}, sort_keys=False)
+
+
+# ---------------------------------------------------------------- what each key means
+# One line per key of SCENE_SCHEMA and SWEEP_SCHEMA, for `rodphase config --help`-like
+# listings and the generated reference (docs/gen_reference.py renders it with each key's
+# default and allowed values, read from the schema). tests/test_docs.py checks that every
+# key has one.
+MEANINGS: dict[str, str] = {
+    "rod.length": "rest length L0",
+    "rod.radius": "rest radius a0 (thins as a0/√e with the stretch e of an incompressible rod)",
+    "rod.elements": "elements n of the discrete rod (n+1 nodes), or auto: from the rod's "
+                    "slenderness over rod.element_length and its twist (90° an element at "
+                    "most); a given count below L0/a0 (with contact) or 120° of twist an "
+                    "element draws a warning",
+    "rod.element_length": "the element length rod.elements: auto aims at, in rest radii "
+                          "(contact needs elements no longer than about the radius)",
+    "rod.elements_from": "how the count in force was chosen (auto or given); set by "
+                         "validation and by --set rod.elements",
+    "rod.density": "mass density",
+    "rod.imperfection": "random rest curvature that breaks the straight rod's symmetry",
+    "rod.seed": "seed of the imperfection",
+    "material.youngs_modulus": "Young's modulus E",
+    "material.shear_modulus": "shear modulus G; auto = the paper's 2E/3",
+    "material.incompressible": "the section shrinks as the rod stretches (A·e constant)",
+    "material.law": "paper: Gazzola 2018's law (the paper's figures); neo_hookean: forces and "
+                    "couples from one strain energy (conserves energy)",
+    "material.bend_stiffness": "B = EI given directly (null: from E and the radius)",
+    "material.twist_stiffness": "C = GJ given directly (null: from G and the radius)",
+    "material.shear_stiffness": "4GA/3 given directly (null: from G and the radius)",
+    "material.axial_stiffness": "EA given directly (null: from E and the radius)",
+    "ends.start": "the start (node 0): clamped or free",
+    "ends.end_axial": "the end along the axis: a constant force, a prescribed displacement, "
+                      "or free",
+    "ends.end_lateral": "the end held on the axis or free to move sideways",
+    "ends.end_rotation": "the end's frame held (turned by the twist protocol) or free",
+    "ends.start_body": "a rigid cylinder beyond a clamped start that takes part in contact; "
+                       "none lets a loop slip over the end (Fig S3)",
+    "ends.end_body": "the same beyond a laterally held end",
+    "ends.body_radius": "radius of the end bodies",
+    "loading.force_multiple": "end load as a multiple of the Euler load F_C",
+    "loading.force": "end load in newtons (instead of force_multiple or extension)",
+    "loading.extension": "end load given as the extension L/L0 of the incompressible rod "
+                         "under it: F = E·A0·(1 − 1/e)",
+    "loading.force_ramp_time": "time over which the load ramps up",
+    "loading.twist_turns": "end rotation in turns (instead of a twist density)",
+    "loading.twist_density": "end rotation as the paper's Φa = θ·a0/L0",
+    "loading.twist_density_current": "end rotation as Φa of the stretched straight rod "
+                                     "(rest value / e^1.5)",
+    "loading.twist_rate": "speed of the twist ramp",
+    "loading.quasi_static_below": "start on the straight loaded rod at this fraction of its "
+                                  "buckling twist instead of ramping from rest; 0 = the "
+                                  "paper's whole protocol",
+    "physics.self_contact": "self-contact (penalty spring–dashpot between capsules)",
+    "physics.friction": "Coulomb friction coefficient of self-contact",
+    "physics.gravity": "gravity vector",
+    "contact.stiffness": "pair spring per unit element length, in units of E",
+    "contact.damping_ratio": "damping ratio ζ of the pair dashpot",
+    "contact.dashpot": "explicit: the dashpot is part of the force; implicit: backward Euler "
+                       "per pair after the kick (no time-step limit)",
+    "contact.exclusion": "elements closer than this arc length never touch",
+    "contact.fold": "keep nodes inside the exclusion from folding tighter than the rod (no "
+                    "self-passage, no link lost)",
+    "contact.thinning_force": "the contact spring's pull along elements whose radius thins "
+                              "with stretch (contact does no work on a stretching rod)",
+    "contact.sleep": "take the larger step of a rod without contact until it first touches "
+                     "itself or an end body",
+    "contact.skin": "margin of the Verlet list of candidate pairs",
+    "contact.near_skin": "smallest margin of the short list the force loop runs over",
+    "contact.penetration_limit": "overlap beyond which the run stops as unstable",
+    "solver.dt": "time step; auto = safety × the stable bound from the stiffest mode",
+    "solver.safety": "fraction of the stable time step used when dt is auto",
+    "solver.damping": "linear drag: velocities decay as exp(−damping·t) without forces",
+    "solver.rotational_damping": "drag on the spins; auto = 40·√(G/ρ)/L0 (twist modes "
+                                 "overdamped)",
+    "solver.quadratic_drag": "drag that grows with speed; 0 = off",
+    "solver.strain_rate_damping": "axial Kelvin–Voigt damping time η; damps the stiff "
+                                  "axial and contact vibrations; 0 = off",
+    "solver.hold_until": "a hold ends at equilibrium, or after hold_max_time",
+    "solver.hold_tolerance": "equilibrium: residual force below this fraction of the force "
+                             "scale",
+    "solver.hold_max_time": "longest hold; a hold that has not settled then ends "
+                            "not_converged",
+    "solver.settle_window": "also end a hold once the window-mean shape moves less than "
+                            "hold_tolerance × L0; 0 = residual test only",
+    "solver.max_steps": "a hard cap on the steps of a run (null: none)",
+    "solver.refine_up_to": "a run stopped as under-resolved is run again with twice the "
+                           "elements, up to this many",
+    "solver.refinements": "the same limit as doublings of rod.elements (1: up to twice the "
+                          "scene's count), so that it follows the rod; the larger limit holds",
+    "solver.refine_from": "a refined run goes on from a second before the trip, or starts over",
+    "solver.slow_down_to": "a run still stopped while an end turns is run again at half the "
+                           "twist rate, down to this rate",
+    "solver.stability_probe": "a hold ends only at an equilibrium that survives a small "
+                              "perturbation",
+    "solver.probe_size": "size of the probe's perturbation",
+    "solver.static_stability": "with the probe: a candidate not in contact must also be "
+                               "stable by the model's own stiffness",
+    "output.history_interval": "time between history rows",
+    "output.topology": "compute link, twist and writhe for the history",
+    "output.snapshots": "rod shapes kept besides the final one: auto (all for run, final for "
+                        "sweeps), all, final, or every k-th history row",
+    "pull.distance": "how far the end is pulled (solenoid_loss)",
+    "pull.rate": "pulling speed",
+    "pull.extra_turns": "turns put in during the pull (a diagonal path through the map)",
+    "pull.release": "release instead of pull",
+    "stiffen.factor": "final E / initial E (stiffening)",
+    "stiffen.time": "duration of the stiffening ramp",
+    "compress.slack": "distance the ends approach (helical_buckling)",
+    "compress.time": "time over which slack and turns are put in",
+    "muscle.helix_radius": "radius of the coiled fibre's helix",
+    "muscle.pitch": "pitch of the helix",
+    "muscle.loops": "loops of the helix",
+    "muscle.inserted_twist": "twist inserted in the fibre",
+    "muscle.chirality": "twist and coil of the same (homochiral) or opposite hand",
+    "muscle.growth_factor": "final radius / a0 of the swelling fibre",
+    "muscle.growth_time": "duration of the swelling",
+    "muscle.load": "weight hung on the muscle",
+    "agent.first": "start of the active segment",
+    "agent.last": "end of the active segment",
+    "agent.pull_multiple": "tension the agent relaxes, in F_C",
+    "agent.extra_twist_density": "twist the agent adds over its segment",
+    "agent.at_twist_density": "twist density at which the agent acts",
+    "sweep.scene": "the scene swept: a shipped name or a YAML path (relative to the sweep's "
+                   "file)",
+    "sweep.set": "overrides applied to the scene, as --set would",
+    "sweep.axes": "the axes and their [low, high] ranges (see AXES)",
+    "sweep.sampler": "how points are drawn: random, lhs, sobol, grid, continuation, adaptive, "
+                     "paths; boundaries: runs placed by bracketing (rodphase boundaries)",
+    "sweep.samples": "how many points",
+    "sweep.seed": "seed of the sampler (the same seed gives the same points and results)",
+    "sweep.columns": "paths sampler: loads (columns of the map); null = √samples",
+    "sweep.boundary": "boundaries sampler: tolerance (L/L0 width of a plectoneme-solenoid "
+                      "bracket, 0.005), twist_tolerance (Phi*a width of the triple point's, "
+                      "0.05), levels (twist levels of the first round, 6)",
+}

@@ -27,7 +27,7 @@ contact (rod/static.py, its docstring: neutral sliding modes, a creeping solenoi
 corrector converges there only beside those soft modes (static.solve_beside_soft_modes), and
 they are how the shape takes up twist: a static path in twist fails after 0 to 0.1 of Φa in
 steps of 0.005, and where it runs it costs 10-30 times what the kernel's ramp and hold cost
-per unit of twist (docs/performance.md, "A twist continuation beside the soft modes"). The
+per unit of twist (docs/history/performance.md, "A twist continuation beside the soft modes"). The
 onset, where the branch does have an isolated equilibrium, is static.
 
 Each sample's result records its place on the path (diagnostics["path"]): the column, its
@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from . import config as C
+from . import config
 from .result import RunResult, rotation_put_in
 from .runner import REFINABLE_GUARDS, finished_holds, run_scene, split_continuation
 from .units import TURN
@@ -68,7 +68,7 @@ def onset_of(cfg) -> float:
     from .rod.onset import straight_onset_turns
     from .scenes import rod_from
 
-    return straight_onset_turns(rod_from(cfg), C.straight_extension(cfg), tolerance=1e-6)
+    return straight_onset_turns(rod_from(cfg), config.straight_extension(cfg), tolerance=1e-6)
 
 
 def reached_samples(result: RunResult) -> int:
@@ -97,7 +97,7 @@ def jump_turns(run: RunResult) -> float | None:
 def _with(cfg, **values):
     from .scenes import SCENES
 
-    return C.validate_scene(C.apply_overrides(cfg.plain(), list(values.items())), SCENES)
+    return config.validate_scene(config.apply_overrides(cfg.plain(), list(values.items())), SCENES)
 
 
 def _tagged(result: RunResult, column: Column, rank: int, onset: float, reached: str,
@@ -143,11 +143,12 @@ def run_column(column: Column) -> list[RunResult]:
         if i not in rest:
             results[i] = _tagged(run_scene(column.scenes[i]), column, i, onset, REACHED_ALONE)
     incompressible = first.material.incompressible
-    elements, most = first.rod.elements, max(first.rod.elements, first.solver.refine_up_to)
+    elements, most = first.rod.elements, config.refine_limit(first)
     lost = 0.0  # s, the wall time of path runs that finished no sample
     while rest:
         # refinement is this loop's: the run itself must not redo the column from the start
-        cfg = _with(first, **{"rod.elements": elements, "solver.refine_up_to": elements})
+        cfg = _with(first, **{"rod.elements": elements, "solver.refine_up_to": elements,
+                              "solver.refinements": 0})
         run = run_scene(cfg, twist_targets=[column.targets[i] for i in rest])
         done = reached_samples(run)
         jump = jump_turns(run)

@@ -143,7 +143,11 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
                  f"holds ≤ {solver.get('hold_max_time', float('nan')):g} s to equilibrium "
                  f"(tolerance {solver.get('hold_tolerance', float('nan')):g}), "
                  f"damping {solver.get('damping', float('nan')):g}/s")
-    if sweep:
+    if sweep and sweep.get("sampler") == "boundaries":
+        bracket = sweep.get("boundary") or {}
+        parts.append(f"runs placed by bracketing (rodphase boundaries, tolerance "
+                     f"{bracket.get('tolerance', 0.005):g} in L/L0)")
+    elif sweep:
         parts.append(f"{sweep.get('samples', '?')} {sweep.get('sampler', '?')} samples, "
                      f"seed {sweep.get('seed', '?')}")
     if table is not None and "status" in table:
@@ -164,7 +168,7 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
               title: str | None = None, twist: str = "twist_density", caption: str | None = None,
               size: tuple[float, float] | str | None = None, ax=None,
               onset: pd.DataFrame | None = None,
-              critical: pd.DataFrame | None = None) -> Figure:
+              lines: pd.DataFrame | None = None) -> Figure:
     """Morphological phase map (paper Fig. 3) of a sweep table.
 
     x = extension L/L0 ("extension"), y = twist density Φa (column `twist`: "twist_density",
@@ -181,9 +185,9 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
     "column" / "page" (a journal's single column, full width). `onset` (tabulate.onset_lines)
     draws the straight rod's buckling twist: the model's own (solid), the sheared clamped
     Greenhill twist (its n → ∞ limit, dotted blue) and the unsheared one (dashed), on the
-    same twist axis. `critical` (tabulate.critical_twist of the same twist column) draws the
-    measured critical twist per extension bin (± half its bracket) and, where it has one,
-    its straight-line fit over the bins it was fitted to, with the fit in the legend.
+    same twist axis. `lines` (a boundaries table, rodphase.boundaries.lines, in the rest
+    Φa) draws the traced plectoneme–solenoid boundary with its bracket as a band and the
+    triple point with its error bars (boundary_lines).
     """
     if "extension" not in table.columns:
         raise ValueError(f"phase_map needs the column 'extension'; the table has "
@@ -263,19 +267,8 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                                    style, color=colour, lw=1.0 if style != ":" else 1.4,
                                    zorder=1, label=label)
 
-        if critical is not None and len(critical):
-            handles.append(ax.errorbar(
-                critical["extension"], critical["critical"], yerr=critical["half_gap"],
-                fmt="_", ms=9, color=VERMILLION, elinewidth=1.0, capsize=0, zorder=4,
-                label="critical twist, measured"))
-            if critical.attrs.get("fit"):
-                slope, intercept, r2, _, above = critical.attrs["fit"]
-                fitted = critical[critical["extension"] > above]["extension"]
-                x = np.array([fitted.min(), fitted.max()])
-                handles += ax.plot(x, slope * x + intercept, "-.", color=VERMILLION, lw=1.0,
-                                   zorder=1, label=f"fit: {slope:.2f}·L/L0 "
-                                   f"{'−' if intercept < 0 else '+'} {abs(intercept):.2f}, "
-                                   f"R² {r2:.2f}")
+        if lines is not None and len(lines) and twist != "phi_a_current":
+            handles += boundary_lines(ax, lines)
 
         ax.set_ylabel(TWIST_DENSITY_LABEL if twist != "phi_a_current" else
                       r"twist density $\Phi a$ of the stretched rod (rad)")
@@ -291,13 +284,10 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
         bar.ax.text(0.5, 1.02, "solenoid", transform=bar.ax.transAxes, ha="center",
                     va="bottom", fontsize=end_size)
         if handles and own:
-            # four columns of the onset lines' long labels are wider than the figure
-            long = any(len(h.get_label()) > 24 for h in handles)
             fig.legend(handles=handles, loc="outside upper center",
-                       ncols=min(len(handles), 2 if small else
-                                 (3 if len(handles) > 6 or long else 4)),
-                       frameon=False,
-                       handletextpad=0.3, columnspacing=1.2)
+                       ncols=legend_columns([h.get_label() for h in handles], figsize[0],
+                                            7 if small else 9),
+                       frameon=False, handletextpad=0.3, columnspacing=1.2)
         elif handles:
             ax.legend(handles=handles, frameon=False, fontsize=7, handletextpad=0.3)
         if caption:
@@ -307,6 +297,48 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
             fig.supxlabel("\n".join(textwrap.wrap(caption, width)), fontsize=6.5, color="0.3",
                           ha="center")
         return _done(fig, path)
+
+
+def legend_columns(labels: list[str], width: float, fontsize: float) -> int:
+    """How many legend columns of `labels` fit across a figure `width` inches wide: the
+    widest label at ~0.55 em a character plus its marker and spacing (~3.5 em) per column,
+    at most four."""
+    em = fontsize / 72.0  # inches
+    column = (0.55 * max(len(label) for label in labels) + 3.5) * em
+    return max(1, min(4, len(labels), int(0.95 * width // column)))
+
+
+def boundary_lines(ax, lines: pd.DataFrame) -> list:
+    """Draw a boundaries table's plectoneme–solenoid boundary (the brackets' middles joined,
+    the brackets as a band) and its triple point (error bars: its brackets) on `ax`; return
+    the legend handles."""
+    handles = []
+    ps = lines[lines["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
+    # a bracket that failed runs left wide (the model fails there) is no point of the line
+    wide = ps["failed"].fillna(0) >= 3 if "failed" in ps else pd.Series(False, ps.index)
+    if wide.any():
+        handles.append(ax.errorbar(
+            ps.loc[wide, "extension"], ps.loc[wide, "twist_density"],
+            xerr=[ps.loc[wide, "extension"] - ps.loc[wide, "extension_low"],
+                  ps.loc[wide, "extension_high"] - ps.loc[wide, "extension"]],
+            fmt="none", ecolor=VERMILLION, elinewidth=1.0, capsize=3, ls=":", zorder=4,
+            label="bracket left wide (failed runs)"))
+    ps = ps[~wide]
+    if len(ps):
+        ax.fill_betweenx(ps["twist_density"], ps["extension_low"], ps["extension_high"],
+                         color=VERMILLION, alpha=0.25, lw=0, zorder=1)
+        handles += ax.plot(ps["extension"], ps["twist_density"], "-", color=VERMILLION, lw=1.4,
+                           marker="|", ms=6, zorder=4, label="plectoneme–solenoid, traced")
+    tp = lines[lines["kind"] == "triple_point"]
+    for row in tp.itertuples():
+        handles.append(ax.errorbar(
+            [row.extension], [row.twist_density],
+            xerr=[[row.extension - row.extension_low], [row.extension_high - row.extension]],
+            yerr=[[row.twist_density - row.twist_density_low],
+                  [row.twist_density_high - row.twist_density]],
+            fmt="*", ms=11, color="black", mfc="gold", elinewidth=1.0, capsize=2, zorder=5,
+            label="triple point"))
+    return handles
 
 
 def _smooth(x, y, points: int = 200):

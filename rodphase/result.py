@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -133,6 +134,39 @@ class RunResult:
     @property
     def end_rotation_turns(self) -> np.ndarray:
         return self.history["end_rotation"] / (2 * np.pi)
+
+    # the run's final values, so that `result.link` replaces `result.history["link"][-1]`
+    def _final(self, name: str) -> float:
+        """The last history row's `name`; NaN if the history has no such column (link, twist
+        and writhe with output.topology: false) or no rows."""
+        column = self.history.get(name)
+        return float(column[-1]) if column is not None and len(column) else math.nan
+
+    @property
+    def link(self) -> float:
+        """Lk at the run's end [turns], of the open rod (= twist + writhe)."""
+        return self._final("link")
+
+    @property
+    def twist(self) -> float:
+        """Tw at the run's end [turns]: the rotation of d1 about the tangent, summed."""
+        return self._final("twist")
+
+    @property
+    def writhe(self) -> float:
+        """Wr at the run's end [turns]."""
+        return self._final("writhe")
+
+    @property
+    def end_force(self) -> float:
+        """Axial force [N] the outside exerts on the end node at the run's end (the load, or
+        the reaction of a prescribed displacement)."""
+        return self._final("end_force")
+
+    @property
+    def end_torque(self) -> float:
+        """Axial torque [N m] the outside exerts on the end element at the run's end."""
+        return self._final("end_torque")
 
 
 def history_unit(name: str) -> str:

@@ -9,10 +9,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 
 import numpy as np
 
-from . import config as C
+from . import config
 from .result import RunResult, rotation_put_in
 from .rod.model import Problem
 from .rod.simulate import clamp_reference, current_radii
@@ -187,7 +188,7 @@ REFINE_BACK = 1.0  # s
 # At Fig 3's triple point (Phi*a 1.92, L/L0 1.13, n = 160) the largest stretch there grew
 # from 1.28 to 1.64 in 5 s of a 0.5 turns/s ramp, and stayed at 1.27 at 0.25 turns/s, where
 # the run ends a plectoneme; neither 320 elements nor a step 0.4 times as long mends all such
-# runs (docs/reproduction.md, "The triple point's failures").
+# runs (docs/history/fig3-corner.md, "The triple point's failures").
 SLOWABLE_GUARDS = ("clamp_lag", "resolution", "shear")
 
 
@@ -197,19 +198,6 @@ def _anchors(origin: Problem, first: RunResult, stage: int) -> tuple[np.ndarray,
     own = [j for j in range(stage + 1) if j == 0 or origin.stages[j].controls is not None][-1]
     positions = origin.state.positions if own == 0 else first.stage_states[own - 1][0]
     return positions[0].copy(), positions[-1].copy()
-
-
-def _steps_until(first: RunResult, stage: int, stage_start: float, at: float) -> int:
-    """Steps `first` took up to time `at` in stage `stage`: its reports for the stages before,
-    and the time into the stage over its step(s) (the larger one before contact woke)."""
-    d = first.diagnostics
-    before = sum(entry["steps"] for entry in d["stages"][:stage])
-    dt, asleep = d["dt"], d.get("dt_asleep")
-    woke = d.get("contact_woke_at")
-    if asleep is None or (woke is not None and woke <= stage_start):
-        return before + round((at - stage_start) / dt)
-    awake_from = at if woke is None else min(max(woke, stage_start), at)
-    return before + round((awake_from - stage_start) / asleep + (at - awake_from) / dt)
 
 
 def refined_from_trip(first: RunResult, origin: Problem, problem: Problem, topology: bool,
@@ -254,10 +242,8 @@ def refined_from_trip(first: RunResult, origin: Problem, problem: Problem, topol
                for name in second.history if name in first.history}
     diagnostics = dict(second.diagnostics)
     diagnostics["stages"] = first.diagnostics["stages"][:stage] + second.diagnostics["stages"]
-    # the steps of the run as kept (first's up to the resume point), as for a run refined
-    # from the start; what first did after it is in wall_time_before_refining
-    diagnostics["steps"] = (_steps_until(first, stage, stage_start, at)
-                            + second.diagnostics["steps"])
+    # the steps and wall time are this attempt's own (second's); run_scene adds up every
+    # attempt's, first's whole run included
     diagnostics["refined_at"] = at
     if resume.contact_awake:  # the fine run started awake: contact woke in the coarse one
         diagnostics["contact_woke_at"] = woke
@@ -286,7 +272,7 @@ def run_scene(scene, *, topology: bool | None = None,
     SLOWABLE_GUARDS); `twist_targets` (turns) makes it a continuation."""
     from .scenes import SCENES, build
 
-    cfg = scene if isinstance(scene, C.Frozen) else C.validate_scene(scene, SCENES)
+    cfg = scene if isinstance(scene, config.Frozen) else config.validate_scene(scene, SCENES)
     extra = {} if twist_targets is None else {"twist_targets": twist_targets}
     want_topology = cfg.output.topology if topology is None else topology
 
@@ -304,13 +290,27 @@ def run_scene(scene, *, topology: bool | None = None,
             problem = continue_from(problem, stored)
         return problem, run(problem, max_steps=cfg.solver.max_steps, topology=want_topology)
 
-    def refined(cfg) -> tuple[Problem, RunResult, list[int], float]:
+    # every simulation this run makes, in order: what it cost and how it ended, so that the
+    # run's steps, wall time and message account for all of them (issue #46)
+    attempts: list[dict] = []
+
+    def attempted(result: RunResult, cfg, start: str) -> RunResult:
+        d = result.diagnostics
+        attempts.append({"elements": int(d.get("elements", cfg.rod.elements)),
+                         "twist_rate": float(cfg.loading.twist_rate), "start": start,
+                         "status": result.status, "guard": d.get("guard"),
+                         "steps": int(d.get("steps", 0)),
+                         "wall_time": float(d.get("wall_time", 0.0))})
+        return result
+
+    def refined(cfg) -> tuple[Problem, RunResult, list[int]]:
         """The run of `cfg`, refined as solver.refine_up_to allows: (its problem as it
-        started, its result, the element counts tried, the wall time of the runs not kept)."""
+        started, its result, the element counts tried)."""
         tried = [cfg.rod.elements]
+        limit = config.refine_limit(cfg)  # of the scene's rod, not of a refined one
         refine_from = cfg.solver.refine_from
         origin, result = once(cfg)
-        wall_before = 0.0
+        attempted(result, cfg, "start")
         # A rod turned by > 135° between neighbouring frames needs more elements, not a
         # smaller step, and so does one sheared by > 45° (a snap into a loop as tight as the
         # rod, at Fig 3's top edge: at n = 80 15 of 200 points, at n = 140 1 of 40): with
@@ -319,25 +319,28 @@ def run_scene(scene, *, topology: bool | None = None,
         # or if the trip came sooner, from the start. A run started from a stored state has
         # the stored rod's elements and cannot refine; a continuation refines from the start.
         while (result.diagnostics.get("guard") in REFINABLE_GUARDS and stored is None
-               and min(2 * tried[-1], cfg.solver.refine_up_to) > tried[-1]):
-            wall_before += result.diagnostics["wall_time"]
-            elements = min(2 * tried[-1], cfg.solver.refine_up_to)
-            cfg = C.validate_scene(C.apply_overrides(cfg.plain(), [("rod.elements", elements)]),
-                                   SCENES)
+               and min(2 * tried[-1], limit) > tried[-1]):
+            elements = min(2 * tried[-1], limit)
+            cfg = config.validate_scene(
+                config.apply_overrides(cfg.plain(), [("rod.elements", elements)]), SCENES)
             resumed = None
             if refine_from == "trip" and elements == 2 * tried[-1] and not extra:
                 resumed = refined_from_trip(result, origin, build(cfg), want_topology,
                                             cfg.solver.max_steps)
-            result = resumed if resumed is not None else once(cfg)[1]
+            if resumed is not None:
+                result = attempted(resumed, cfg, f"t = {resumed.diagnostics['refined_at']:.4g} s")
+            else:
+                result = attempted(once(cfg)[1], cfg, "start")
             tried.append(elements)
         if len(tried) > 1:
             result.diagnostics["refined_from"] = tried[:-1]
             result.diagnostics["notes"].append(
                 f"under-resolved at {', '.join(map(str, tried[:-1]))} elements; this is the "
-                f"run with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to})")
-        return origin, result, tried, wall_before
+                f"run with {tried[-1]} (solver.refine_up_to = {cfg.solver.refine_up_to}, "
+                f"solver.refinements = {cfg.solver.refinements})")
+        return origin, result, tried
 
-    origin, result, tried, wall_before = refined(cfg)
+    origin, result, tried = refined(cfg)
     rates = [cfg.loading.twist_rate]
     floor = cfg.solver.slow_down_to
     while (floor > 0 and stored is None and not extra
@@ -345,23 +348,50 @@ def run_scene(scene, *, topology: bool | None = None,
            and result.diagnostics.get("stages")
            and _turning(origin, len(result.diagnostics["stages"]) - 1)
            and rates[-1] / 2 >= floor * (1 - 1e-9)):
-        wall_before += result.diagnostics["wall_time"]  # its coarser tries are in already
         stopped = (f"the {result.diagnostics['guard']} guard stopped it at "
                    f"{result.diagnostics['elements']} elements while an end turned at "
                    f"{rates[-1]:g} turns/s")
         rates.append(rates[-1] / 2)
-        slower = C.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
-        origin, result, more, before = refined(C.validate_scene(slower, SCENES))
-        wall_before += before
+        slower = config.apply_overrides(cfg.plain(), [("loading.twist_rate", rates[-1])])
+        origin, result, more = refined(config.validate_scene(slower, SCENES))
         tried += more
         result.diagnostics["notes"].append(
             f"{stopped}; this is the run at {rates[-1]:g} turns/s, from the start "
             f"(solver.slow_down_to = {floor:g})")
     if len(rates) > 1:
         result.diagnostics["twist_rates_tried"] = rates
-    if len(tried) > 1:
-        result.diagnostics["wall_time_before_refining"] = wall_before
-    return result
+    return _accounted(result, attempts, cfg)
+
+
+def _accounted(result: RunResult, attempts: list[dict], cfg) -> RunResult:
+    """`result` with its steps and wall time summed over every attempt (the kept run's own
+    are in its last attempt), the attempts listed, and a failed run's advice trimmed of what
+    was already tried: more elements up to solver.refine_up_to, a slower twist down to
+    solver.slow_down_to."""
+    d = result.diagnostics
+    if len(attempts) > 1:
+        d["attempts"] = attempts
+        d["steps"] = sum(a["steps"] for a in attempts)
+        d["wall_time"] = sum(a["wall_time"] for a in attempts)
+        d["us_per_step"] = 1e6 * d["wall_time"] / max(d["steps"], 1)
+    if result.status != "unstable" or len(attempts) < 2:
+        return result
+    most = max(a["elements"] for a in attempts)
+    slowest = min(a["twist_rate"] for a in attempts)
+    tried = (f"Already tried: {len(attempts)} attempts, up to {most} elements "
+             f"(solver.refine_up_to, solver.refinements)")
+    if slowest < attempts[0]["twist_rate"]:
+        tried += (f" and down to {slowest:g} turns/s (solver.slow_down_to = "
+                  f"{cfg.solver.slow_down_to:g})")
+    message = result.message
+    if slowest < attempts[0]["twist_rate"]:
+        message = message.replace("lower loading.twist_rate (turns/s)",
+                                  f"a twist rate below {slowest:g} turns/s (solver.slow_down_to)")
+    message = message.replace("use more rod.elements", f"more than {most} elements "
+                              "(solver.refinements)")
+    message = message.replace("Use more rod.elements", f"More than {most} elements "
+                              "(solver.refinements)")
+    return dataclasses.replace(result, message=f"{message} {tried}.")
 
 
 def finished_holds(result: RunResult) -> list[int]:
@@ -460,11 +490,13 @@ def compile_kernel() -> float:
         except OSError:  # no second process here: the topology compiles below, in this one
             helper = None
     try:
-        cfg = C.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
-                                "loading": {"force_multiple": 25, "force_ramp_time": 1e-3,
-                                            "twist_density": 0.1, "twist_rate": 100.0},
-                                "solver": {"hold_max_time": 1e-3, "stability_probe": True}},
-                               scenes.SCENES)
+        with warnings.catch_warnings():  # 8 elements on purpose: a tiny rod compiles the same
+            warnings.simplefilter("ignore", config.ResolutionWarning)
+            cfg = config.validate_scene({"scene": "twist_under_load", "rod": {"elements": 8},
+                                    "loading": {"force_multiple": 25, "force_ramp_time": 1e-3,
+                                                "twist_density": 0.1, "twist_rate": 100.0},
+                                    "solver": {"hold_max_time": 1e-3, "stability_probe": True}},
+                                   scenes.SCENES)
         problem = scenes.build(cfg)
         result = run(problem)
         if helper is not None:
@@ -552,7 +584,7 @@ def check_memory(cfg, *, twist_targets: list[float] | None = None, share: int = 
     interval = cfg.output.history_interval
     least = interval * peak / room
     shared = f" per worker ({share} at once)" if share > 1 else ""
-    raise C.ConfigError(
+    raise config.ConfigError(
         f"{where}output.history_interval", interval,
         f"at least {least:.3g} s: {interval:g} s asks for up to {rows:.3g} snapshots × {nodes} "
         f"nodes × 48 bytes = {snapshot_bytes / 2**20:.0f} MiB over {seconds:.4g} s of "

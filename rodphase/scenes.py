@@ -120,7 +120,7 @@ def twist_under_load(cfg, twist_targets: list[float] | None = None) -> Problem:
     load ramp; the twist ramp starts there (or, for a target below that twist, the hold).
     Below its buckling twist the straight rod is the only equilibrium the ramp can follow, so
     this changes no final state; the margin 1 − s covers the theory's distance from the
-    discrete rod's onset (docs/performance.md, "A quasi-static straight start").
+    discrete rod's onset (docs/history/performance.md, "A quasi-static straight start").
     """
     rod = rod_from(cfg)
     force = C.load_force(cfg) or 0.0

@@ -2,7 +2,7 @@
 
 A store is one HDF5 file, OUT.h5, holding one sweep (or one run): the resolved config and its
 hash as file attributes, one group per finished run under /runs, and an optional per-run
-classification table under /classification. docs/data-format.md describes every name and
+classification table under /classification. docs/reference/data-format.md describes every name and
 unit so that the file can be read with h5py or pandas alone.
 
 Crash safety rests on one rule: OUT.h5 is never modified in place.
@@ -122,6 +122,19 @@ def _plain(value, where: str = "attribute"):
     if isinstance(value, (np.generic, np.ndarray)):
         return value.tolist()
     return value
+
+
+def _check_shapes(g: h5py.Group) -> None:
+    """The final state's arrays are numbers of the shapes rodphase writes (n elements):
+    ValueError naming the first that is not (a damaged file, or another program's)."""
+    n = g["rest_lengths"].shape[0] if g["rest_lengths"].ndim == 1 else -1
+    expected = {"positions": (n + 1, 3), "directors": (n, 3, 3), "radii": (n,),
+                "rest_lengths": (n,)}
+    for name, shape in expected.items():
+        data = g[name]
+        if data.shape != shape or data.dtype.kind not in "fiu":
+            raise ValueError(f"{name} is {data.dtype} of shape {data.shape}, not numbers of "
+                             f"shape {shape}")
 
 
 def _check_id(run_id: str) -> str:
@@ -383,7 +396,9 @@ class Store:
         """File attributes: rodphase_version, kind, config_yaml, config_hash, created, ..."""
         if self.file is None:
             return dict(self._new_attrs or {})
-        return {k: _plain(v, f"{self._path}: file attribute {k}") for k, v in self.file.attrs.items()}
+        with self._damaged("its file attributes"):
+            return {k: _plain(v, f"{self._path}: file attribute {k}")
+                    for k, v in self.file.attrs.items()}
 
     def _close_main(self) -> None:
         if self.file is not None and self.file.id.valid:
@@ -439,17 +454,32 @@ class Store:
                 f = None
                 self._refresh()  # merged by the writer since we listed it: it is in the main file
             if f is not None:
-                with f:
+                with f, self._damaged(f"run {run_id}"):
                     yield f["runs"][run_id]
                 return
         runs = self.file["runs"] if self.file is not None else {}
         if run_id not in runs:
             raise KeyError(f"no run {run_id!r} in {self._path} ({len(self.run_ids())} runs "
                            "stored)")
-        yield runs[run_id]
+        with self._damaged(f"run {run_id}"):
+            yield runs[run_id]
+
+    @contextlib.contextmanager
+    def _damaged(self, what: str) -> Iterator[None]:
+        """What reading `what` meets in a damaged file or one laid out by another program (a
+        member or attribute missing or of another type, a bit flipped) as NotAStore, one
+        line naming the file, instead of h5py's, json's or numpy's own exception."""
+        try:
+            yield
+        except (KeyError, TypeError, ValueError, IndexError, OSError, AttributeError,
+                RuntimeError) as exc:  # h5py raises RuntimeError for a broken B-tree
+            raise NotAStore(f"{self._path}: {what} cannot be read ({type(exc).__name__}: "
+                            f"{_short(exc)}): the file is damaged or was not written by "
+                            "rodphase") from None
 
     def run_ids(self) -> list[str]:
-        merged = list(self.file["runs"]) if self.file is not None else []
+        with self._damaged("its list of runs"):
+            merged = list(self.file["runs"]) if self.file is not None else []
         return sorted(set(merged) | set(self._parts))
 
     def _status(self, run_id: str) -> str:
@@ -481,6 +511,7 @@ class Store:
             history = g["history"]
             columns = [_plain(c, where) for c in history.attrs.get("columns", list(history))]
             picked = slice(None) if snapshots else slice(0, 0)
+            _check_shapes(g)
             return RunResult(
                 status=_plain(g.attrs["status"], where),
                 message=_plain(g.attrs["message"], f"{where} message"),
@@ -535,6 +566,9 @@ class Store:
         self._need_writer()
         if not self._parts and not self._replace and self.file is not None:
             return
+        if (not self._parts and self._replace and self._path.exists()
+                and not _is_empty_hdf5(self._path)):
+            return  # another config's store goes when the first new run comes, not before
         parts = dict(self._parts)
         # a copied run takes about its part's size again (data and metadata); twice that
         # leaves room for HDF5's own bookkeeping
@@ -642,10 +676,44 @@ class Store:
         finally:
             self._refresh()
 
+    def write_boundaries(self, df: pd.DataFrame, units: dict[str, tuple[str, str]],
+                         settings: dict) -> None:
+        """Store the traced boundaries (rodphase.boundaries.lines) under /boundaries, one
+        1-D dataset per column (with its `units` and `long_name`), replacing earlier ones;
+        `settings` (what made them) as the group's attributes."""
+        self._need_writer()
+        self.merge()
+        try:
+            with self._rewritten(2 * int(df.memory_usage(deep=True).sum()) + (1 << 18)) as f:
+                if "boundaries" in f:
+                    del f["boundaries"]
+                g = f.create_group("boundaries", track_order=True)
+                for name in df.columns:
+                    g.create_dataset(str(name), data=_column_array(df[name]))
+                    unit, meaning = units.get(str(name), ("", ""))
+                    g[str(name)].attrs["units"] = unit
+                    if meaning:
+                        g[str(name)].attrs["long_name"] = meaning
+                g.attrs["columns"] = [str(c) for c in df.columns]
+                for key, value in settings.items():
+                    g.attrs[key] = value
+        finally:
+            self._refresh()
+
+    def boundaries(self) -> pd.DataFrame | None:
+        """The stored boundaries table (write_boundaries), or None; its settings in attrs."""
+        if self.file is None or "boundaries" not in self.file:
+            return None
+        g = self.file["boundaries"]
+        table = _read_classification(g)
+        table.attrs.update({k: _plain(v) for k, v in g.attrs.items() if k != "columns"})
+        return table
+
     def classification(self) -> pd.DataFrame | None:
         if self.file is None or "classification" not in self.file:
             return None
-        return _read_classification(self.file["classification"])
+        with self._damaged("the classification table"):
+            return _read_classification(self.file["classification"])
 
     def table(self, classification: pd.DataFrame | None = None) -> pd.DataFrame:
         """One row per run: run_id, params, status, message, wall_time, steps, and the
@@ -895,8 +963,15 @@ def _open_main(path: Path, check_layout: bool = True) -> h5py.File:
         raise NotAStore(f"{path} cannot be read as HDF5 ({reason}): give a file written by "
                         "rodphase run or rodphase sweep") from None
     try:
-        version = _plain(file.attrs.get("format_version"), f"{path}: format_version")
-        if _plain(file.attrs.get("format"), f"{path}: format") != FORMAT or "runs" not in file:
+        try:
+            version = _plain(file.attrs.get("format_version"), f"{path}: format_version")
+            declared = _plain(file.attrs.get("format"), f"{path}: format")
+            has_runs = "runs" in file and isinstance(file["runs"], h5py.Group)
+        except (KeyError, TypeError, ValueError, OSError, RuntimeError) as exc:
+            raise NotAStore(f"{path}: its attributes cannot be read ({type(exc).__name__}: "
+                            f"{_short(exc)}): the file is damaged or was not written by "
+                            "rodphase") from None
+        if declared != FORMAT or not has_runs:
             raise NotAStore(f"{path} is an HDF5 file but not a rodphase store (no format "
                             f"'{FORMAT}' attribute or /runs group): give a file written by "
                             "rodphase run or rodphase sweep")
@@ -904,7 +979,12 @@ def _open_main(path: Path, check_layout: bool = True) -> h5py.File:
             raise NotAStore(f"{path} is a rodphase store of format_version {version}; this "
                             f"rodphase reads {', '.join(map(str, READABLE_VERSIONS))}")
         if check_layout:
-            _check_layout(file, str(path))
+            try:
+                _check_layout(file, str(path))
+            except (KeyError, TypeError, ValueError, OSError, RuntimeError) as exc:
+                raise NotAStore(f"{path}: its layout cannot be read ({type(exc).__name__}: "
+                                f"{_short(exc)}): the file is damaged or was not written by "
+                                "rodphase") from None
     except BaseException:
         file.close()
         raise
@@ -942,11 +1022,21 @@ def provenance() -> dict:
             "pandas": pd.__version__, "platform": platform.platform()}
 
 
+def _declares_store(path: Path) -> bool:
+    """Whether `path` is HDF5 with rodphase's format attribute (a store, if a damaged one:
+    --force may replace it; nothing else)."""
+    try:
+        with _h5(path, "r") as f:
+            return _plain(f.attrs.get("format")) == FORMAT
+    except (OSError, RuntimeError, ValueError, KeyError, TypeError, StoreError):
+        return False
+
+
 def _is_empty_hdf5(path: Path) -> bool:
     try:
         with _h5(path, "r") as f:
             return not len(f) and not len(f.attrs)
-    except OSError:
+    except (OSError, RuntimeError, ValueError, KeyError):  # damaged: not empty, not a store
         return False
 
 
@@ -977,6 +1067,12 @@ def open_store(path, *, config_text: str, config_hash: str, version: str, kind: 
                     held = existing.attrs.get("config_hash")
             except NotAStore as exc:
                 held, other = None, str(exc)
+            if other and not (_declares_store(path) or path.stat().st_size == 0):
+                # `-o typo.yaml`: advising --force (or obeying it) would put a store in place
+                # of the user's own file
+                raise NotAStore(other.split(": give a file")[0] + ": --force replaces only a "
+                                "rodphase store, and this file is not one; nothing was "
+                                "changed: give another output file (or move this one away)")
             if held != config_hash and not replace:
                 revision = (earlier or {}).get(held)
                 if revision is not None:

@@ -108,3 +108,96 @@ def boundary_error(reference, samples, axes, lo, span) -> float:
     _, nearest = cKDTree(scaled(usable)).query(scaled(reference))
     guessed = usable["phase"].to_numpy()[nearest]
     return float(np.mean(guessed != reference["phase"].to_numpy()))
+
+
+# ---------------------------------------------------------------- current figures
+# docs/current.json holds one value per quantity (with its date, machine and commit); the
+# scripts that measure a quantity call record_current, which re-renders docs/current.md
+# (the page of current figures) and docs/history/figures.md (every value a quantity had
+# before). tests/test_docs.py fails when either page is stale against the JSON.
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+CURRENT = DOCS / "current.json"
+
+
+def git_commit(short: bool = True) -> str:
+    """The commit of the checkout the code runs from ("unknown" outside git)."""
+    import subprocess
+
+    args = ["git", "rev-parse", "--short" if short else "--verify", "HEAD"]
+    done = subprocess.run(args, capture_output=True, text=True, cwd=DOCS.parent, check=False)
+    return done.stdout.strip() or "unknown"
+
+
+def machine_text() -> str:
+    """'CPU, N cores, load L' for a row of current figures."""
+    m = machine()
+    return f"{m['cpu']}, {m['nproc']} cores, load {m['load'][0]:.2f} at the start"
+
+
+def record_current(key: str, value: str, *, source: str, machine: str | None = None,
+                   date: str | None = None, commit: str | None = None,
+                   extra: dict | None = None, path: Path = CURRENT) -> None:
+    """Make `value` the current value of quantity `key` in docs/current.json (the previous
+    value goes to its history), then re-render the pages made from it. `source` names the
+    command that measured it; machine, date and commit default to this machine, today (UTC)
+    and the checkout's commit. `extra` adds fields to the entry (e.g. the sha256 of the
+    figure the same command drew, which tests/test_docs.py checks)."""
+    import datetime
+    import json
+
+    path = Path(path)
+    data = json.loads(path.read_text())
+    entry = data["quantities"][key]  # a new quantity is added to the JSON by hand, once
+    if "value" in entry:
+        entry.setdefault("history", []).insert(
+            0, {k: entry[k] for k in ("value", "date", "machine", "commit", "source")})
+        del entry["history"][20:]  # the 20 latest are enough
+    entry.update(value=value, source=source, machine=machine or machine_text(),
+                 date=date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
+                 commit=commit or git_commit(), **(extra or {}))
+    path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n")
+    write_current_pages(path)
+
+
+def render_current(data: dict) -> str:
+    """docs/current.md from the JSON: one row per quantity."""
+    rows = [f"| {q['title']} | {q['value']} | {q['date']} | {q['machine']} | `{q['commit']}` | "
+            f"{q['source']} |" for q in data["quantities"].values()]
+    return "\n".join([
+        "# Current figures", "",
+        "<!-- generated from docs/current.json by rodphase.studytools.render_current: do not "
+        "edit; the command in the last column writes its row -->", "",
+        data["intro"], "",
+        "| quantity | value | date | machine | commit | measured by |",
+        "|---|---|---|---|---|---|", *rows, "",
+        "Earlier values of each quantity: [history of the figures](history/figures.md).", ""])
+
+
+def render_figure_history(data: dict) -> str:
+    """docs/history/figures.md from the JSON: every earlier value of each quantity."""
+    out = ["# History of the current figures", "",
+           "<!-- generated from docs/current.json by rodphase.studytools.render_figure_history: "
+           "do not edit -->", "",
+           "Each quantity of [the current figures](../current.md) with the values it had "
+           "before, newest first. Values before 2026-12-07 were collected from the dated "
+           "pages of this history ([the old current.md](current-2026-12-06.md) lists them "
+           "with their sources).", ""]
+    for q in data["quantities"].values():
+        out += [f"## {q['title']}", "", "| value | date | machine | commit | measured by |",
+                "|---|---|---|---|---|"]
+        for h in [q] + q.get("history", []):
+            out.append(f"| {h['value']} | {h['date']} | {h['machine']} | `{h['commit']}` | "
+                       f"{h['source']} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def write_current_pages(path: Path = CURRENT) -> None:
+    """Re-render docs/current.md and docs/history/figures.md from `path`."""
+    import json
+
+    data = json.loads(Path(path).read_text())
+    docs = Path(path).parent
+    (docs / "current.md").write_text(render_current(data))
+    (docs / "history" / "figures.md").write_text(render_figure_history(data))

@@ -95,7 +95,10 @@ def _paths(axes: dict, samples: int, seed: int, columns: int | None = None) -> n
 
 
 SAMPLERS: dict[str, Callable] = {"random": _random, "lhs": _lhs, "sobol": _sobol, "grid": _grid,
-                                 "continuation": _grid, "adaptive": _lhs, "paths": _paths}
+                                 "continuation": _grid, "adaptive": _lhs, "paths": _paths,
+                                 # the boundaries sampler places its runs by bracketing
+                                 # (boundaries.boundary_rounds); its grid only checks the box
+                                 "boundaries": _grid}
 
 
 def sample_points(sweep) -> list[dict[str, float]]:
@@ -323,8 +326,13 @@ class SweepReport:
 def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "loky",
               scheduler: str | None = None, retry_failed: bool = False, replace: bool = False,
               progress: bool = True, echo: Callable[[str], None] = print,
-              reconnect_timeout: float = RECONNECT_TIMEOUT) -> SweepReport:
+              reconnect_timeout: float = RECONNECT_TIMEOUT,
+              rounds_of: Callable | None = None,
+              lines: Callable[[str], None] | None = None) -> SweepReport:
     """Run every missing sample of the sweep into the store at `out_path` (resuming).
+
+    `rounds_of(store)`, if given, yields the rounds of jobs instead of the sampler (each
+    round is run into the store before the next is made: boundaries.boundary_rounds).
 
     Each finished run is durable in the store as soon as it arrives (see store.py). SIGINT and
     SIGTERM stop the sweep: the workers are killed, what finished is kept, and the report's
@@ -334,7 +342,11 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
     On Dask, a scheduler that is lost (killed, restarted, unreachable) is waited for and
     reconnected to for `reconnect_timeout` seconds, and so is a worker once every worker has
     left; the runs in flight are sent again. Past that, ClusterLost says what was lost and
-    how many runs are stored."""
+    how many runs are stored.
+
+    `lines`: where a progress line goes every PROGRESS_EVERY seconds (runs finished, failed,
+    elapsed, an estimate of what is left), for a sweep without a terminal to draw the bar
+    on (nohup, batch jobs, CI); None: none."""
     from .store import open_store
 
     # before the store is made or anything compiled: a command that refuses to start
@@ -368,7 +380,7 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
                         pool = stack.enter_context(
                             _pool(backend, scheduler, jobs, reconnect_timeout))
                     _run_rounds(sweep, scene, store, pool, retry_failed, progress, report,
-                                echo, out_path)
+                                echo, out_path, rounds_of, lines)
                 except ClusterLost as exc:
                     exc.stored = len(store.run_ids())
                     exc.total = max(report.total, exc.stored)
@@ -381,9 +393,14 @@ def run_sweep(sweep, scene, out_path: str, *, jobs: int = 1, backend: str = "lok
     return report
 
 
-def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path):
-    rounds = adaptive_rounds(sweep, scene, store) if sweep.sampler == "adaptive" else [
-        plan(sweep, scene)]
+def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo, out_path,
+                rounds_of=None, lines=None):
+    if rounds_of is not None:
+        rounds = rounds_of(store)
+    elif sweep.sampler == "adaptive":
+        rounds = adaptive_rounds(sweep, scene, store)
+    else:
+        rounds = [plan(sweep, scene)]
     for all_jobs in rounds:
         finished = store.done_ids(include_failed=not retry_failed)
         todo = [j for j in all_jobs if not set(j.run_ids) <= finished]
@@ -395,7 +412,7 @@ def _run_rounds(sweep, scene, store, pool, retry_failed, progress, report, echo,
                   else f" along {len(todo)} path(s)" if sweep.sampler == "paths" else "")
         echo(f"Launching {total - skipped} of {total} runs{shared} {pool.where} with "
              f"{pool.workers} worker(s)" + (f"; {skipped} already in {out_path}" if skipped else ""))
-        _run_jobs(store, longest_first(todo), pool, progress, report)
+        _run_jobs(store, longest_first(todo), pool, progress, report, lines)
 
 
 # seconds a hold is guessed to take when ordering jobs (most end well before their limit)
@@ -429,11 +446,13 @@ def longest_first(jobs: list[Job]) -> list[Job]:
 WORKER_DEATH_RETRIES = 1
 
 
-def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport) -> None:
+def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport,
+              lines: Callable[[str], None] | None = None) -> None:
     """Run jobs on the pool, a bounded number of tasks at a time; the parent stores each
     finished run the moment it arrives, so finished results never pile up in memory and a
     kill loses only the runs in flight. Short runs go several to a task (see _Batches)."""
     bar = _progress(sum(len(j.run_ids) for j in todo), progress)
+    pace = _ProgressLines(sum(len(j.run_ids) for j in todo), report, lines)
     waiting = list(reversed(todo))  # pop() takes them in sampling order
     running: dict = {}  # future -> task (a list of jobs)
     deaths: dict[int, int] = {}  # id(job) -> times its worker died under it
@@ -506,6 +525,7 @@ def _run_jobs(store, todo: list[Job], pool, progress: bool, report: SweepReport)
                                                 if result.message else ""))
                     bar.update(1)
                     bar.set_postfix(done=report.done, failed=report.failed, refresh=False)
+            pace.tick()
             if outage is not None:
                 # the runs in flight are lost with the scheduler: send them again once it is
                 # back (none of them was stored or counted, so none is counted twice)
@@ -946,6 +966,8 @@ def stop_on_signals() -> Iterator[_Stop]:
     finally:
         for s, old in previous.items():
             signal.signal(s, old)
+        # read inside the block; left set, a later _run_jobs of this process would stop at once
+        _stop.signal_name, _stop.interruptible = None, 0
 
 
 @contextmanager
@@ -1013,6 +1035,41 @@ def adaptive_rounds(sweep, scene, store) -> Iterator[list[Job]]:
         for i, j in ranked[:size]:
             jitter = 0.05 * np.linalg.norm(pts[i] - pts[j]) * rng.standard_normal(len(names))
             unit.append(np.clip(0.5 * (pts[i] + pts[j]) + jitter, 0.0, 1.0))
+
+
+# s between two progress lines of a sweep without a terminal (the bar's stand-in in a log)
+PROGRESS_EVERY = 30.0
+
+
+class _ProgressLines:
+    """'12 of 40 runs finished (1 failed), 3 min 20 s elapsed, about 7 min 50 s left' every
+    PROGRESS_EVERY seconds through `say`, counting this round's runs."""
+
+    def __init__(self, total: int, report: SweepReport, say: Callable[[str], None] | None):
+        self.total, self.report, self.say = total, report, say
+        self.first = report.done + report.failed
+        self.start = self.last = time.perf_counter()
+
+    def tick(self) -> None:
+        now = time.perf_counter()
+        if self.say is None or not self.total or now - self.last < PROGRESS_EVERY:
+            return
+        self.last = now
+        finished = self.report.done + self.report.failed - self.first
+        elapsed = now - self.start
+        left = (f", about {_duration(elapsed / finished * (self.total - finished))} left"
+                if 0 < finished < self.total else "")
+        self.say(f"{finished} of {self.total} runs finished ({self.report.failed} failed), "
+                 f"{_duration(elapsed)} elapsed{left}")
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    if seconds < 3600:
+        return f"{seconds // 60} min {seconds % 60} s"
+    return f"{seconds // 3600} h {seconds % 3600 // 60} min"
 
 
 def _progress(total: int, enabled: bool):

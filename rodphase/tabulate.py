@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 
@@ -52,12 +54,52 @@ _RUN_COLUMNS = ("status", "wall_time", "steps")
 def classify_table(store, run_ids=None, **thresholds) -> pd.DataFrame:
     """Classify every run of an open store (or those of `run_ids`): one row per run, run_id
     and what the classification adds (the parameters, status and timings are the store's;
-    see Store.table). Nothing is written."""
+    see Store.table), with each run's distance to the straight rod's onset where its scene
+    has one (onset_columns). Nothing is written."""
     rows = []
     for run_id in sorted(store.run_ids() if run_ids is None else run_ids):
         row = summarize(store.read_run(run_id), **thresholds)
         rows.append({"run_id": run_id} | {k: v for k, v in row.items() if k not in _RUN_COLUMNS})
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    from .config import stored_config
+
+    return onset_columns(table, stored_config(store.attrs.get("config_yaml", "")))
+
+
+def onset_columns(table: pd.DataFrame, config: dict) -> pd.DataFrame:
+    """`table` with `onset_ratio` (a run's final Φa over the model's onset Φa_c at its load
+    and its own elements) and `near_onset` (classify.near_onset of it), for the runs of a
+    scene whose straight rod has an onset (loaded_rod). Φa_c costs 0.02-0.25 s a run (n =
+    40-160), so it is computed only for runs whose Φa is within classify.ONSET_SCREEN of the
+    sheared clamped Greenhill twist, the same rod's n → ∞ limit; a run further out is not
+    near without it (ratio NaN)."""
+    from .classify import ONSET_SCREEN, near_onset
+    from .rod.onset import sheared_greenhill_turns, straight_onset_turns
+
+    rod = loaded_rod(config)
+    needed = {"phi_a_rest", "end_force", "elements"}
+    if rod is None or table.empty or not needed <= set(table.columns):
+        return table
+    to_phi = units.TURN * rod.radius / rod.length
+    ratios = np.full(len(table), np.nan)
+    for i, row in enumerate(table.itertuples(index=False)):
+        phi = float(row.phi_a_rest)
+        e = units.extension_under_load(rod.youngs_modulus, rod.radius, float(row.end_force),
+                                       rod.law) if np.isfinite(row.end_force) else np.nan
+        if not (np.isfinite(phi) and np.isfinite(e) and e > 1.0 and row.elements > 0):
+            continue
+        try:
+            estimate = sheared_greenhill_turns(rod, e) * to_phi
+        except ValueError:
+            continue
+        if abs(abs(phi) / estimate - 1.0) > ONSET_SCREEN:
+            continue
+        try:
+            own = dataclasses.replace(rod, elements=int(row.elements))
+            ratios[i] = abs(phi) / (straight_onset_turns(own, e, tolerance=1e-6) * to_phi)
+        except ValueError:  # too few elements to resolve the onset
+            continue
+    return table.assign(onset_ratio=ratios, near_onset=[near_onset(r) for r in ratios])
 
 
 # (unit, meaning) of every column a table of rodphase can have: the classification group's
@@ -65,7 +107,7 @@ def classify_table(store, run_ids=None, **thresholds) -> pd.DataFrame:
 # dimensionless, a count or an index; "": text)
 COLUMNS = {
     "run_id": ("", "the run's name, key into /runs"),
-    "status": ("", "ok, unstable, not_converged or error (see the README)"),
+    "status": ("", "ok, unstable, not_converged or error (docs/reference/statuses.md)"),
     "message": ("", "what ended the run, and what to change if it failed"),
     "wall_time": ("s", "wall-clock time of the run"),
     "steps": ("1", "time steps taken"),
@@ -84,6 +126,10 @@ COLUMNS = {
     "link": ("turns", "final Lk"),
     "twist": ("turns", "final Tw"),
     "writhe": ("turns", "final Wr"),
+    "onset_ratio": ("1", "final Phi*a over the model's onset at the run's load and elements "
+                    "(NaN: more than 3 % from the onset, or no onset in the scene)"),
+    "near_onset": ("", "|onset_ratio - 1| < 0.002: the label is the stability push's, the "
+                   "static onset is the answer (classify.near_onset)"),
     "unseen_coil": ("", "labelled straight but |Wr| > 0.5 turn: a coil too tight for the "
                     "classifier's 5-radii partner separation (classify.unseen_coil)"),
 }
@@ -135,18 +181,12 @@ def path_table(result, *, every: int = 1, epsilon=0.2, plectoneme_below=-0.5,
     return table
 
 
-def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
-    """The straight rod's buckling twist along `extensions` (L/L0) for the scene of a store's
-    resolved config (its `scene` section): the model's own onset (rod/onset.py: the perfect
-    discrete rod at the scene's resolution, with its shear and stretch), the sheared clamped
-    Greenhill twist (the same rod's n → ∞ limit) and the unsheared one, each as the rest
-    Φa = θ·a0/L0 (`model_rest`, `sheared_rest`, `greenhill_rest`) and as the stretched rod's
-    (`model_current`, `sheared_current`, `greenhill_current`). None for a scene whose
-    rod is not clamped at both ends under an end load, or whose resolved config is not there
-    (the onset is for that rod only). Where the rod has too few elements to resolve its onset
-    the model's line is NaN (left out)."""
+def loaded_rod(config: dict):
+    """The Rod of a resolved config's scene (a store's config or its `scene` section) when
+    its straight rod has an onset that rod/onset.py computes: clamped at the start, held
+    across the axis and turned at the end under an end force, incompressible under the
+    paper's law; else None."""
     from .rod.model import Rod
-    from .rod.onset import greenhill_turns, sheared_greenhill_turns, straight_onset_turns
 
     scene = config.get("scene") if isinstance(config.get("scene"), dict) else config
     try:
@@ -167,6 +207,24 @@ def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
     except (KeyError, TypeError, ValueError):
         return None
     if not loaded or not rod.incompressible or rod.law != "paper":
+        return None
+    return rod
+
+
+def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
+    """The straight rod's buckling twist along `extensions` (L/L0) for the scene of a store's
+    resolved config (its `scene` section): the model's own onset (rod/onset.py: the perfect
+    discrete rod at the scene's resolution, with its shear and stretch), the sheared clamped
+    Greenhill twist (the same rod's n → ∞ limit) and the unsheared one, each as the rest
+    Φa = θ·a0/L0 (`model_rest`, `sheared_rest`, `greenhill_rest`) and as the stretched rod's
+    (`model_current`, `sheared_current`, `greenhill_current`). None for a scene whose
+    rod is not clamped at both ends under an end load, or whose resolved config is not there
+    (the onset is for that rod only). Where the rod has too few elements to resolve its onset
+    the model's line is NaN (left out)."""
+    from .rod.onset import greenhill_turns, sheared_greenhill_turns, straight_onset_turns
+
+    rod = loaded_rod(config)
+    if rod is None:
         return None
     e = np.asarray(extensions, dtype=float)
 

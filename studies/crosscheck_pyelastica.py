@@ -37,6 +37,7 @@ if __name__ == "__main__":
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
+from numba import njit
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
@@ -59,6 +60,9 @@ POISSON = 0.5  # shear_modulus = E / (poisson + 1) = 2E/3
 CONTACT_K = 1e4  # RodSelfContact(k=1e4, nu=10)
 CONTACT_NU = 10.0
 KICK = 1e-4  # velocity_collection[2, n_elem // 2] -= 1e-4, every step of the twist
+# the SolenoidsCase end's rate as run, over the nominal 0.2 turns/s: the damper's
+# exp(-2 dt 3200)^e per step (tests/data/crosscheck_solenoid.npz: 1.0403781 rad/s from 10 s)
+AS_RUN_RATE = 0.8279066
 
 CASES = {
     "solenoid": dict(
@@ -69,12 +73,33 @@ CASES = {
         turns=10, time_start_twist=0.0, time_twist=5.0 * 10, time_relax=50.0,
         n_elem=150, force=0.0, initial_kick=True,
     ),
+    # Fig 4a through the authors' code (issue #49): the SolenoidsCase with its 13 turns
+    # actually put in (the end frame prescribed during the twist, so the damper cannot eat
+    # 2 of them), held 10 s, then the end pulled 0.4 m at 5 mm/s with its frame held, as
+    # rodphase's solenoid_loss scene pulls. Not an example of PyElastica's: its own settings
+    # (n, dt, contact, damping, 300 N) with the paper's pull appended.
+    "solenoid_pull": dict(
+        turns=13, time_start_twist=10.0, time_twist=5.0 * 13, time_relax=10.0,
+        n_elem=100, force=300.0, initial_kick=False,
+        prescribed_twist=True, pull_distance=0.4, pull_rate=0.005,
+    ),
+    # the same at rodphase's Fig 4a twist, Φa = 1.6: 10.19 turns (rodphase's side of
+    # `reference solenoid_pull --turns 10.19`)
+    "solenoid_pull_10": dict(
+        turns=10.19, time_start_twist=10.0, time_twist=5.0 * 10.19, time_relax=10.0,
+        n_elem=100, force=300.0, initial_kick=False,
+        prescribed_twist=True, pull_distance=0.4, pull_rate=0.005,
+    ),
 }
 
 
 def settings(case: str) -> dict:
     c = dict(CASES[case])
-    c["final_time"] = c["time_start_twist"] + c["time_twist"] + c["time_relax"]
+    c.setdefault("prescribed_twist", False)
+    c.setdefault("pull_distance", 0.0)
+    c.setdefault("pull_rate", 1.0)
+    c["time_pull"] = c["pull_distance"] / c["pull_rate"]
+    c["final_time"] = c["time_start_twist"] + c["time_twist"] + c["time_relax"] + c["time_pull"]
     n = c["n_elem"]
     c["dt_nominal"] = 0.0025 * BASE_LENGTH / n
     c["total_steps"] = int(c["final_time"] / c["dt_nominal"])
@@ -90,18 +115,47 @@ def settings(case: str) -> dict:
 # ------------------------------------------------------------------ PyElastica reference
 
 
-def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path) -> None:
+def run_reference(case: str, final_time: float | None, frame_interval: float, raw: Path,
+                  thinning: float = 0.0, contact_from: float = 0.0,
+                  dt_override: float | None = None, prescribe_twist: float | None = None,
+                  contact_split: bool = False, turns: float | None = None,
+                  kick_shape: str = "point") -> None:
+    """The case in PyElastica 1.0; `thinning` 1.0 adds rodphase's thinning force to the
+    self-contact (studies/pyelastica_thinning.py), 0.0 is the example's RodSelfContact.
+    `contact_from` > 0 skips the contact loop while the rod is straight (its force is then
+    exactly zero; the pairs within reach at the switch-on are printed and stored).
+    `dt_override` replaces the example's step (the damper is exact per step, whatever the step; the
+    twist-phase kick, a velocity taken off every step, is scaled by dt/dt_example so that it
+    stays the same 0.04 N point force). `prescribe_twist` F turns the end frame at exactly F
+    times the nominal rate during the twist (F = AS_RUN_RATE reproduces the example's damped
+    rate, which a larger step would damp further), then the example's snap to the final frame."""
     import elastica as ea
     from elastica._rotations import _get_rotation_matrix
 
     from rodphase.studytools import machine
 
     c = settings(case)
+    c["thinning"] = thinning
+    c["contact_from"] = contact_from
+    c["contact_split"] = contact_split
+    if turns is not None:  # at the same rate: the twist takes 5 s per turn, as the example's
+        c["turns"] = float(turns)
+        c["time_twist"] = 5.0 * float(turns)
+        c["final_time"] = c["time_start_twist"] + c["time_twist"] + c["time_relax"] + c["time_pull"]
     if final_time is not None:
         c["final_time_requested"] = c["final_time"]
         c["final_time"] = float(final_time)
     n = c["n_elem"]
     dt = c["dt"]  # the example steps with final_time / total_steps (of its full run)
+    kick = KICK
+    # rodphase's stand-in for the point kick (build_problem): a uniform lateral acceleration
+    # with the same first-mode projection, (π/2)·F/M, F = m_node·KICK/dt the point force
+    uniform_kick = (math.pi / 2) * (MASS / c["n_elem"] * KICK / dt) / MASS
+    c["kick_shape"] = kick_shape
+    if dt_override is not None:
+        kick = KICK * dt_override / dt
+        dt = c["dt"] = float(dt_override)
+        c["kick_velocity_per_step"] = kick
     steps = int(round(c["final_time"] / dt))
     every = max(1, int(round(frame_interval / dt)))
 
@@ -118,9 +172,14 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
         rod.velocity_collection[2, n // 2] -= KICK
     sim.append(rod)
     sim.dampen(rod).using(ea.AnalyticalLinearDamper, damping_constant=c["damping_constant"],
-                          time_step=c["dt_nominal"])
+                          time_step=dt if dt_override is not None else c["dt_nominal"])
 
     t0, tt, turns = c["time_start_twist"], c["time_twist"], c["turns"]
+    prescribed = c["prescribed_twist"] or prescribe_twist is not None
+    rate_factor = 1.0 if prescribe_twist is None else float(prescribe_twist)
+    c["twist_rate_factor"] = rate_factor
+    t_pull, pull_rate = t0 + tt + c["time_relax"], c["pull_rate"]
+    pulled = c["pull_distance"] > 0
 
     class TwistEnd(ea.ConstraintBase):
         """Start clamped; end free before the twist, sliding along y and spun during it,
@@ -134,16 +193,30 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
             axis /= np.linalg.norm(axis)
             self.final_end = _get_rotation_matrix(-theta, axis.reshape(3, 1)).reshape(3, 3) @ director_end
             self.ang_vel = theta / tt * axis
+            self.axis = axis.reshape(3, 1)
+            self.Q_end0 = director_end.copy()
             self.x0 = position_start.copy()
             self.Q0 = director_start.copy()
+            self.y_pull0 = None
 
         def constrain_values(self, system, time):
+            if pulled and time > t_pull:
+                # the pull: the end's axial position prescribed, its frame held
+                if self.y_pull0 is None:
+                    self.y_pull0 = float(system.position_collection[1, -1])
+                system.position_collection[1, -1] = self.y_pull0 + pull_rate * (time - t_pull)
             if time > tt + t0:
                 system.position_collection[..., 0] = self.x0
                 system.position_collection[0, -1] = 0.0
                 system.position_collection[2, -1] = 0.0
                 system.director_collection[..., 0] = self.Q0
                 system.director_collection[..., -1] = self.final_end
+            elif prescribed and time >= t0:
+                # the end frame turned by exactly the nominal angle so far: the damper
+                # (which scales the end's omega after the constraint) cannot eat twist
+                angle = rate_factor * 2.0 * turns * np.pi * (time - t0) / tt
+                system.director_collection[..., -1] = (
+                    _get_rotation_matrix(-angle, self.axis).reshape(3, 3) @ self.Q_end0)
 
         def constrain_rates(self, system, time):
             system.velocity_collection[..., 0] = 0.0
@@ -151,20 +224,38 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
             if time > tt + t0:
                 system.velocity_collection[..., -1] = 0.0
                 system.omega_collection[..., -1] = 0.0
+                if pulled and time > t_pull:
+                    system.velocity_collection[1, -1] = pull_rate
             elif time >= t0:
                 system.velocity_collection[0, -1] = 0.0
                 system.velocity_collection[2, -1] = 0.0
                 system.omega_collection[..., -1] = -self.ang_vel
-                system.velocity_collection[2, system.n_elems // 2] -= KICK
+                if kick_shape == "uniform":
+                    system.velocity_collection[2, 1:-1] -= uniform_kick * dt
+                else:
+                    system.velocity_collection[2, system.n_elems // 2] -= kick
 
     sim.constrain(rod).using(TwistEnd, constrained_position_idx=(0, -1),
                              constrained_director_idx=(0, -1))
     if c["force"]:
         sim.add_forcing_to(rod).using(ea.EndpointForces, np.zeros(3), c["force"] * y,
                                       ramp_up_time=t0 - 1)
-    sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=CONTACT_K, nu=CONTACT_NU)
+    contact_holder = {}
+    if thinning or contact_from > 0 or contact_split:
+        class Gated(thinning_self_contact()):  # keeps a handle on the instance PyElastica makes
+            def __init__(self, *a, **kw):
+                super().__init__(*a, **kw)
+                contact_holder["contact"] = self
 
-    frames = {"time": [], "x": [], "d1": [], "omega_end": []}
+        sim.detect_contact_between(rod, rod).using(Gated, k=CONTACT_K, nu=CONTACT_NU,
+                                                   thinning=thinning, active_from=contact_from,
+                                                   split=contact_split)
+    else:
+        sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=CONTACT_K, nu=CONTACT_NU)
+
+    # the end node's internal and external force at each frame: with the end held, the
+    # force the puller must apply is −(internal + contact) along the axis
+    frames = {"time": [], "x": [], "d1": [], "omega_end": [], "internal_end": [], "external_end": []}
 
     class Record(ea.CallBackBaseClass):
         def make_callback(self, system, time, current_step):
@@ -173,21 +264,26 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
                 frames["x"].append(system.position_collection.T.copy())
                 frames["d1"].append(system.director_collection[0].T.copy())
                 frames["omega_end"].append(system.omega_collection[:, -1].copy())
+                frames["internal_end"].append(system.internal_forces[:, -1].copy())
+                frames["external_end"].append(system.external_forces[:, -1].copy())
 
     sim.collect_diagnostics(rod).using(Record)
     sim.finalize()
 
     info = {"case": case, "settings": c, "machine": machine(), "elastica": "1.0.0",
-            "source": f"GazzolaLab/PyElastica@{SOURCE_COMMIT}:{SOURCE[case]}",
+            "source": f"GazzolaLab/PyElastica@{SOURCE_COMMIT}:{SOURCE.get(case, SOURCE['solenoid'])}",
             "frame_interval": every * dt, "steps": steps}
 
     def save(done: bool) -> None:
         info["cpu_time"] = time.process_time() - cpu0
         info["wall_time"] = time.perf_counter() - wall0
         info["finished"] = done
+        if "contact" in contact_holder:
+            info["pairs_at_contact_switch_on"] = contact_holder["contact"].pairs_at_switch_on
         np.savez(raw, time=np.array(frames["time"]), x=np.array(frames["x"]),
                  d1=np.array(frames["d1"]), omega_end=np.array(frames["omega_end"]),
-                 info=json.dumps(info))
+                 internal_end=np.array(frames["internal_end"]),
+                 external_end=np.array(frames["external_end"]), info=json.dumps(info))
 
     stepper = ea.PositionVerlet()
     t = np.float64(0.0)
@@ -215,6 +311,242 @@ def run_reference(case: str, final_time: float | None, frame_interval: float, ra
     print(f"done: cpu {info['cpu_time']:.0f} s, wall {info['wall_time']:.0f} s -> {raw}", flush=True)
 
 
+# ------------------------------------------------------------------ PyElastica's self-contact, + thinning
+# rodphase's contact (rod/contact.py, `thinning`) adds the rest of the gradient of ½kδ² for an
+# incompressible rod: δ = a_i + a_j − d depends on the element lengths through the radii
+# a = a0·√(l0/l), so ∂δ/∂l = −a/(2l), and a touching pair pushes the two nodes of each of its
+# elements apart along it by k·δ·a/(2l). PyElastica 1.0 thins its radius too
+# (cosserat_rod.py: radius = √(volume/length/π)) but its _calculate_contact_forces_self_rod
+# keeps the normal force only. The loop below is PyElastica's own (same skip, bounding test,
+# closest points, 4/3–2/3 split at the ends, unclipped dashpot), written anew in scalars:
+# with thinning 0 it gives PyElastica's forces bit for bit (tests/test_crosscheck_pyelastica.py)
+# at 1/7 of the cost, since PyElastica's allocates 3-vectors in every pair's test.
+# `reference --thinning 1` runs the example with the term added (issue #49).
+
+@njit(cache=True)
+def _closest(x, e, i, j):
+    """PyElastica's `_find_min_dist(x_i, e_i, x_j, e_j)`, first return value (the vector from
+    the closest point of segment i to that of segment j), in scalars: every sum and product in
+    PyElastica's order, so the result is bit-identical (checked in tests), without the 3-vectors
+    it allocates (most of its cost per step in a solenoid)."""
+    x10, x11, x12 = x[0, i], x[1, i], x[2, i]
+    e10, e11, e12 = e[0, i], e[1, i], e[2, i]
+    x20, x21, x22 = x[0, j], x[1, j], x[2, j]
+    e20, e21, e22 = e[0, j], e[1, j], e[2, j]
+    e1e1 = 0.0 + e10 * e10 + e11 * e11 + e12 * e12
+    e1e2 = 0.0 + e10 * e20 + e11 * e21 + e12 * e22
+    e2e2 = 0.0 + e20 * e20 + e21 * e21 + e22 * e22
+    x1e1 = 0.0 + x10 * e10 + x11 * e11 + x12 * e12
+    x1e2 = 0.0 + x10 * e20 + x11 * e21 + x12 * e22
+    x2e1 = 0.0 + e10 * x20 + e11 * x21 + e12 * x22
+    x2e2 = 0.0 + x20 * e20 + x21 * e21 + x22 * e22
+    s = 0.0
+    t = 0.0
+    parallel = abs(1.0 - e1e2**2 / (e1e1 * e2e2)) < 1e-6
+    if parallel:
+        t = (x2e1 - x1e1) / e1e1
+        t = max(0.0, min(t, 1.0))
+        s = (x1e2 + t * e1e2 - x2e2) / e2e2
+        s = max(0.0, min(s, 1.0))
+    else:
+        s = (e1e1 * (x1e2 - x2e2) + e1e2 * (x2e1 - x1e1)) / (e1e1 * e2e2 - (e1e2) ** 2)
+        t = (e1e2 * s + x2e1 - x1e1) / e1e1
+        if (s < 0.0) or (s > 1.0) or (t < 0.0) or (t > 1.0):
+            pt = (x2e1 - x1e1) / e1e1
+            s = 0.0
+            t = max(0.0, min(pt, 1.0))
+            a0 = x10 + e10 * t - x20
+            a1 = x11 + e11 * t - x21
+            a2 = x12 + e12 * t - x22
+            best = np.sqrt(0.0 + a0 * a0 + a1 * a1 + a2 * a2)
+            pt = (x2e1 + e1e2 - x1e1) / e1e1
+            pt = max(0.0, min(pt, 1.0))
+            a0 = x10 + e10 * pt - x20 - e20
+            a1 = x11 + e11 * pt - x21 - e21
+            a2 = x12 + e12 * pt - x22 - e22
+            d = np.sqrt(0.0 + a0 * a0 + a1 * a1 + a2 * a2)
+            if d < best:
+                s = 1.0
+                t = pt
+                best = d
+            ps = (x1e2 - x2e2) / e2e2
+            ps = max(0.0, min(ps, 1.0))
+            a0 = x20 + ps * e20 - x10
+            a1 = x21 + ps * e21 - x11
+            a2 = x22 + ps * e22 - x12
+            d = np.sqrt(0.0 + a0 * a0 + a1 * a1 + a2 * a2)
+            if d < best:
+                s = ps
+                t = 0.0
+                best = d
+            ps = (x1e2 + e1e2 - x2e2) / e2e2
+            ps = max(0.0, min(ps, 1.0))
+            a0 = x20 + ps * e20 - x10 - e10
+            a1 = x21 + ps * e21 - x11 - e11
+            a2 = x22 + ps * e22 - x12 - e12
+            d = np.sqrt(0.0 + a0 * a0 + a1 * a1 + a2 * a2)
+            if d < best:
+                s = ps
+                t = 1.0
+    # and the closest points' places along segment i (t) and segment j (s), in [0, 1]
+    return (x20 + s * e20 - x10 - t * e10, x21 + s * e21 - x11 - t * e11,
+            x22 + s * e22 - x12 - t * e12, t, s)
+
+
+@njit(cache=True)
+def self_contact_with_thinning(x, radius, length, tangent, velocity, external_forces,
+                               contact_k, contact_nu, thinning, split=False):
+    """PyElastica's self-contact force plus `thinning` × k·γ·a/(2l) along each touching
+    element (x: the n element start points (3, n); velocity, external_forces (3, n+1)).
+    With thinning 0 its forces equal PyElastica's bit for bit (tests/test_crosscheck_pyelastica.py)."""
+    n = x.shape[1]
+    edge = length * tangent  # PyElastica's _batch_product_k_ik_to_ik, the same products
+    for i in range(n):
+        skip = int(1 + np.ceil(0.8 * np.pi * radius[i] / length[i]))
+        for j in range(i - skip, -1, -1):
+            radii_sum = radius[i] + radius[j]
+            length_sum = length[i] + length[j]
+            # PyElastica's bounding test, |x_i − x_j| ≥ radii + lengths, in scalars: the same
+            # sum in the same order, without the 3-vector it allocates per pair
+            total = 0.0
+            for k in range(3):
+                dk = x[k, i] - x[k, j]
+                total += dk * dk
+            if np.sqrt(total) >= radii_sum + length_sum:
+                continue
+            d0, d1, d2, ti, sj = _closest(x, edge, i, j)
+            distance = np.sqrt(0.0 + d0 * d0 + d1 * d1 + d2 * d2)
+            d0 /= distance
+            d1 /= distance
+            d2 /= distance
+            gamma = radii_sum - distance
+            if gamma < -1e-5:
+                continue
+            mask = (gamma > 0.0) * 1.0
+            spring = contact_k * gamma
+            r0 = 0.5 * ((velocity[0, i] + velocity[0, i + 1]) - (velocity[0, j] + velocity[0, j + 1]))
+            r1 = 0.5 * ((velocity[1, i] + velocity[1, i + 1]) - (velocity[1, j] + velocity[1, j + 1]))
+            r2 = 0.5 * ((velocity[2, i] + velocity[2, i + 1]) - (velocity[2, j] + velocity[2, j + 1]))
+            dashpot = contact_nu * (0.0 + r0 * d0 + r1 * d1 + r2 * d2)
+            scale = 0.5 * mask * (dashpot + spring)
+            net0 = scale * d0
+            net1 = scale * d1
+            net2 = scale * d2
+            if split:
+                # rodphase's split: the pair's force (2 net per element) at the closest points,
+                # (1 − t, t) between each element's nodes, so that the spring is the gradient
+                # of ½kγ² in the node positions (PyElastica's equal split is not)
+                external_forces[0, i] -= 2.0 * (1.0 - ti) * net0
+                external_forces[1, i] -= 2.0 * (1.0 - ti) * net1
+                external_forces[2, i] -= 2.0 * (1.0 - ti) * net2
+                external_forces[0, i + 1] -= 2.0 * ti * net0
+                external_forces[1, i + 1] -= 2.0 * ti * net1
+                external_forces[2, i + 1] -= 2.0 * ti * net2
+                external_forces[0, j] += 2.0 * (1.0 - sj) * net0
+                external_forces[1, j] += 2.0 * (1.0 - sj) * net1
+                external_forces[2, j] += 2.0 * (1.0 - sj) * net2
+                external_forces[0, j + 1] += 2.0 * sj * net0
+                external_forces[1, j + 1] += 2.0 * sj * net1
+                external_forces[2, j + 1] += 2.0 * sj * net2
+            elif i == n - 1:
+                external_forces[0, i] -= net0 * 4 / 3
+                external_forces[1, i] -= net1 * 4 / 3
+                external_forces[2, i] -= net2 * 4 / 3
+                external_forces[0, i + 1] -= net0 * 2 / 3
+                external_forces[1, i + 1] -= net1 * 2 / 3
+                external_forces[2, i + 1] -= net2 * 2 / 3
+            else:
+                external_forces[0, i] -= net0
+                external_forces[1, i] -= net1
+                external_forces[2, i] -= net2
+                external_forces[0, i + 1] -= net0
+                external_forces[1, i + 1] -= net1
+                external_forces[2, i + 1] -= net2
+            if split:
+                pass
+            elif j == 0:
+                external_forces[0, j] += net0 * 2 / 3
+                external_forces[1, j] += net1 * 2 / 3
+                external_forces[2, j] += net2 * 2 / 3
+                external_forces[0, j + 1] += net0 * 4 / 3
+                external_forces[1, j + 1] += net1 * 4 / 3
+                external_forces[2, j + 1] += net2 * 4 / 3
+            else:
+                external_forces[0, j] += net0
+                external_forces[1, j] += net1
+                external_forces[2, j] += net2
+                external_forces[0, j + 1] += net0
+                external_forces[1, j + 1] += net1
+                external_forces[2, j + 1] += net2
+            if gamma > 0.0 and thinning != 0.0:
+                # the new term: the pair's spring k·γ (the whole pair's, as rodphase's) times
+                # ∂γ/∂l = −a/(2l), pushing each element's two nodes apart along its tangent
+                gi = thinning * spring * radius[i] / (2.0 * length[i])
+                gj = thinning * spring * radius[j] / (2.0 * length[j])
+                for k in range(3):
+                    external_forces[k, i] -= gi * tangent[k, i]
+                    external_forces[k, i + 1] += gi * tangent[k, i]
+                    external_forces[k, j] -= gj * tangent[k, j]
+                    external_forces[k, j + 1] += gj * tangent[k, j]
+
+
+@njit(cache=True)
+def pairs_within_reach(x, radius, length, tangent, margin):
+    """Element pairs (PyElastica's skip) closer than radii_sum + margin: 0 means that no
+    contact force could have acted on this state."""
+    n = x.shape[1]
+    edge = length * tangent  # PyElastica's _batch_product_k_ik_to_ik, the same products
+    count = 0
+    for i in range(n):
+        skip = int(1 + np.ceil(0.8 * np.pi * radius[i] / length[i]))
+        for j in range(i - skip, -1, -1):
+            d0, d1, d2, _, _ = _closest(x, edge, i, j)
+            if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) < radius[i] + radius[j] + margin:
+                count += 1
+    return count
+
+
+
+def thinning_self_contact():
+    """`ThinningSelfContact`, made when PyElastica is imported (the bench extra): its
+    `RodSelfContact(k, nu)` with the pair loop above, plus the thinning force (`thinning` 1.0
+    as rodphase's incompressible rod; 0.0 gives PyElastica's force bit for bit), acting from
+    `active_from` seconds on.
+
+    Before a twisted rod buckles no pair is within reach and the contact force is exactly
+    zero, but PyElastica still pays its O(n²) pair loop every step. `active_from` skips that
+    loop while the rod is straight; at the switch-on the pairs within reach + a/10 are counted
+    and printed, and must be 0 for the run to equal one with contact throughout."""
+    import elastica as ea
+
+    class ThinningSelfContact(ea.RodSelfContact):
+        def __init__(self, k: float, nu: float, thinning: float = 1.0, active_from: float = 0.0,
+                     split: bool = False) -> None:
+            super().__init__(k, nu)
+            self.thinning = float(thinning)
+            self.split = bool(split)
+            self.active_from = float(active_from)
+            self.checked = active_from <= 0.0
+            self.pairs_at_switch_on = None
+
+        def apply_contact(self, system_one, system_two, time=np.float64(0.0)) -> None:
+            if time < self.active_from:
+                return
+            if not self.checked:
+                self.checked = True
+                self.pairs_at_switch_on = int(pairs_within_reach(
+                    system_one.position_collection[..., :-1], system_one.radius, system_one.lengths,
+                    system_one.tangents, 0.1 * float(np.mean(system_one.radius))))
+                print(f"contact on at t={time:.3f} s: {self.pairs_at_switch_on} pairs within "
+                      f"reach + a/10 (must be 0)", flush=True)
+            self_contact_with_thinning(
+                system_one.position_collection[..., :-1], system_one.radius, system_one.lengths,
+                system_one.tangents, system_one.velocity_collection, system_one.external_forces,
+                self.k, self.nu, self.thinning, self.split)
+
+    return ThinningSelfContact
+
+
 def end_rotation(t, d1_end, omega_end, axis=np.array([0.0, 1.0, 0.0])):
     """Unwrapped angle (rad) of the end frame's d1 about `axis`, from frames close enough
     (≤ 0.05 turns apart) to unwrap."""
@@ -237,10 +569,14 @@ def reduce_reference(case: str, raw: Path, out: Path, sample: float = 0.5) -> No
     if idx[-1] != len(t) - 1:
         idx = np.append(idx, len(t) - 1)
     lk, tw, wr = topology_history(X[idx], D[idx])
+    forces = {}
+    if "internal_end" in r.files:  # every raw frame: a force drop can be short
+        forces = {"force_time": t, "internal_end": r["internal_end"],
+                  "external_end": r["external_end"], "end_position_all": X[:, -1, :]}
     np.savez_compressed(
         out, time=t[idx], end_rotation=rot[idx], link=lk, twist=tw, writhe=wr,
         end_position=X[idx, -1, :], final_positions=X[-1], final_d1=D[-1],
-        info=json.dumps(info))
+        info=json.dumps(info), **forces)
     print(f"wrote {out} ({out.stat().st_size / 1e3:.0f} kB, {len(idx)} samples); "
           f"final Lk={lk[-1]:.3f} Tw={tw[-1]:.3f} Wr={wr[-1]:.3f}, "
           f"end rotation {rot[-1] / (2 * np.pi):.3f} turns")
@@ -383,6 +719,12 @@ def build_problem(case: str, sets, twist: str, kick: str, kick_scale: float = 1.
                      controls=Controls(end_force=constant(force), end_rotation=table, gravity=g)),
                Stage(c["time_relax"], label="relax", ends=clamped,
                      controls=Controls(end_force=constant(force), end_rotation=constant(final)))]
+    if c["pull_distance"] > 0:
+        # Fig 4a (case solenoid_pull): the end pulled at a steady rate, its frame held; the
+        # stage holds the end where it finds it, and its reaction is the history's end_force
+        stages.append(Stage(c["time_pull"], label="pull", ends=clamped, controls=Controls(
+            end_rotation=constant(final),
+            end_displacement=ramp(0, c["time_pull"], 0, c["pull_distance"]))))
     problem.stages = tuple(stages)
     problem.ends = sliding
     return problem
@@ -403,15 +745,38 @@ def stop_at(problem, final_time: float):
     return problem
 
 
+def pyelastica_clamp_sets(case: str) -> list[tuple[str, object]]:
+    """The example's clamps, emulated in rodphase without touching its kernel (issue #49).
+
+    PyElastica prescribes the end elements' frames (and the end nodes): its first and last
+    elements are rigid, and the rod bends and twists only between nodes 1 and n-1. rodphase
+    clamps the frame at the end nodes themselves (a spring over half an element), so all of
+    its n elements deform. The rod that deforms in PyElastica is therefore emulated by a
+    rodphase rod two elements shorter at the same element length (n-2 elements, L - 2 L/n),
+    whose clamps sit where PyElastica's second and last-but-one nodes are; its end lies
+    one stretched element short of PyElastica's end node at each end, 2 l e in all
+    (`clamp_end_offset`)."""
+    c = settings(case)
+    n = c["n_elem"]
+    return [("rod.elements", n - 2), ("rod.length", BASE_LENGTH * (n - 2) / n)]
+
+
 def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotation_damping: str,
                  out: Path, bodies: str = "none", kick_scale: float = 1.0,
-                 reference: Path | None = None, final_time: float | None = None) -> dict:
+                 reference: Path | None = None, final_time: float | None = None,
+                 extra_sets=(), clamp: str = "rodphase") -> dict:
+    """The case in rodphase; `extra_sets` ((key, value) pairs of SCENE_SCHEMA) go on top of
+    the mapped settings, and `clamp` "pyelastica" emulates the example's clamps
+    (`pyelastica_clamp_sets`)."""
     from rodphase import classify
     from rodphase.runner import run
     from rodphase.studytools import machine
     from rodphase.topology import topology_history
 
     sets = rodphase_sets(case, contact, dt, rotation_damping, bodies)
+    if clamp == "pyelastica":
+        sets += pyelastica_clamp_sets(case)
+    sets += list(extra_sets)
     problem = build_problem(case, sets, twist, kick, kick_scale, reference)
     if final_time is not None:
         problem = stop_at(problem, final_time)
@@ -427,6 +792,7 @@ def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotati
     d = result.diagnostics
     info = {"case": case, "sets": [[k, v] for k, v in sets], "twist": twist, "kick": kick, "kick_scale": kick_scale,
             "contact": contact, "bodies": bodies, "rotational_damping": rotation_damping,
+            "clamp": clamp,
             "status": result.status, "message": result.message, "cpu_time": cpu,
             "dt": d["dt"], "dt_bound": d["dt_bound"], "steps": d["steps"],
             "us_per_step": d["us_per_step"], "max_pairs": d.get("max_pairs"),
@@ -437,7 +803,8 @@ def run_rodphase(case: str, contact: str, dt: str, twist: str, kick: str, rotati
         out, time=h["time"], end_rotation=h["end_rotation"], link=lk, twist=tw, writhe=wr,
         link_rodphase=h.get("link", np.zeros(0)), twist_rodphase=h.get("twist", np.zeros(0)),
         writhe_rodphase=h.get("writhe", np.zeros(0)), contacts=h["contacts"],
-        penetration=h["penetration"], kinetic=h["kinetic_energy"],
+        penetration=h["penetration"], kinetic=h["kinetic_energy"], end_force=h["end_force"],
+        end_displacement=h["end_displacement"], stage=h["stage"],
         end_position=to_pyelastica(X[:, -1]) if len(X) else np.zeros((0, 3)),
         final_positions=to_pyelastica(result.positions),
         final_d1=to_pyelastica(result.directors[:, 0]), info=json.dumps(info, default=str))
@@ -545,7 +912,7 @@ def compare(case: str, ref_path: Path, rp_path: Path, png: Path | None) -> str:
 # the rod, the load, the imperfection and the ramps by construction, not by copy.
 
 # The points that fail in the map of 2026-12-04 (sweep.sample_points of configs/fig3_paper.yaml,
-# full precision: Φa, L/L0), docs/reproduction.md "The triple point's failures"
+# full precision: Φa, L/L0), docs/history/fig3-corner.md "The triple point's failures"
 FIG3_FAILED = ((2.4905348515138033, 1.1090010169893503), (2.5258821224793793, 1.079950714390725),
                (2.557734097540379, 1.0524589744396509), (2.5985506212338807, 1.1349544170312584))
 # configs/fig3_paper.yaml's run settings that matter here; refine_up_to and slow_down_to are
@@ -836,11 +1203,29 @@ def main(argv=None) -> int:
     a.add_argument("case", choices=sorted(CASES))
     a.add_argument("--final-time", type=float, default=None, help="stop early (s)")
     a.add_argument("--frame-interval", type=float, default=0.05, help="raw frames (s)")
+    a.add_argument("--thinning", type=float, default=0.0,
+                   help="1.0 adds rodphase's thinning force to PyElastica's self-contact (issue #49)")
+    a.add_argument("--sample", type=float, default=0.5, help="s between the reduced record's topology samples")
+    a.add_argument("--dt", type=float, default=None,
+                   help="s; replaces the example's step (the kick is scaled to the same force)")
+    a.add_argument("--prescribe-twist", type=float, default=None, metavar="FACTOR",
+                   help="turn the end frame at FACTOR x the nominal rate (the SolenoidsCase as run: 0.8279066)")
+    a.add_argument("--kick-shape", choices=("point", "uniform"), default="point",
+                   help="point: the example's mid-node kick; uniform: rodphase's stand-in for it")
+    a.add_argument("--turns", type=float, default=None,
+                   help="turns put in instead of the case's, at its 0.2 turns/s (Fig 4a at 10.2 turns)")
+    a.add_argument("--contact-split", action="store_true",
+                   help="the pair force at the closest points, (1-t, t) per element, as rodphase's "
+                        "(PyElastica: half on each node)")
+    a.add_argument("--contact-from", type=float, default=0.0,
+                   help="s; skip the contact loop before it (the straight rod touches nowhere)")
     a.add_argument("--raw", type=Path, default=None)
     a.add_argument("-o", "--out", type=Path, default=None)
     b = sub.add_parser("reduce", help="raw PyElastica frames -> tests/data npz")
     b.add_argument("case", choices=sorted(CASES))
     b.add_argument("--raw", type=Path, default=None)
+    b.add_argument("--sample", type=float, default=0.5, help="s between topology samples")
+    b.add_argument("--thinning", type=float, default=0.0, help="names the files as `reference --thinning`")
     b.add_argument("-o", "--out", type=Path, default=None)
     r = sub.add_parser("rodphase", help="run the case's settings in rodphase")
     r.add_argument("case", choices=sorted(CASES))
@@ -896,14 +1281,17 @@ def main(argv=None) -> int:
                 args.png or IMG / f"crosscheck_{args.case}.png")
         return 0
 
-    raw = args.raw or Path(f"/tmp/crosscheck_raw_{args.case}.npz")
-    out = args.out or DATA / f"crosscheck_{args.case}.npz"
+    tag = args.case + ("_thinning" if getattr(args, "thinning", 0.0) else "")
+    raw = args.raw or Path(f"/tmp/crosscheck_raw_{tag}.npz")
+    out = args.out or DATA / f"crosscheck_{tag}.npz"
     if args.cmd == "reference":
-        run_reference(args.case, args.final_time, args.frame_interval, raw)
+        run_reference(args.case, args.final_time, args.frame_interval, raw, args.thinning,
+                      args.contact_from, args.dt, args.prescribe_twist, args.contact_split, args.turns,
+                      args.kick_shape)
         out.parent.mkdir(parents=True, exist_ok=True)
-        reduce_reference(args.case, raw, out)
+        reduce_reference(args.case, raw, out, args.sample)
     elif args.cmd == "reduce":
-        reduce_reference(args.case, raw, out)
+        reduce_reference(args.case, raw, out, args.sample)
     return 0
 
 

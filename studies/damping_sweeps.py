@@ -12,7 +12,7 @@ KEY=VALUE` changes every scene or sweep of every variant alike (a smoke test mak
 one process round by round (min and median of the rounds), so that a change of load on a
 shared machine hits them alike. `demo` counts the statuses of configs/quick.yaml's 24 runs.
 `figures` runs studies/figures.py for each variant into DIR/<variant>/ and reads back the
-numbers docs/reproduction.md quotes (every run's status, Fig S9's last hold, Fig 4a's force
+numbers docs/history/reproduction.md quotes (every run's status, Fig S9's last hold, Fig 4a's force
 noise, Fig 2b's writhe per solenoid turn). `fig3` times the first --samples points of
 configs/fig3_paper.yaml per variant, interleaved in chunks, and counts their phases.
 --jobs 1 throughout: on a shared machine one process per variant keeps the timings fair.

@@ -29,7 +29,7 @@ and audits each state:
 - the largest element stretch e = l/l0 and where it is.
 
 A state where the unaccounted powers outgrow the counted losses is one where the law puts
-energy into the rod faster than the damping takes it out. docs/reproduction.md, "Where the corner's failures get their energy", reads the table.
+energy into the rod faster than the damping takes it out. docs/history/fig3-corner.md, "Where the corner's failures get their energy", reads the table.
 """
 
 import argparse

@@ -3,7 +3,7 @@
 Each figure is one or two shipped scenes (rodphase/configs/scenes/). Its runs go to
 DIR/<fig>.h5 (one group per run, readable with `rodphase plot`), its pictures to
 DIR/<fig>.png (the paper's panel) and DIR/<fig>_shape.png (rod snapshots), and the numbers
-that docs/reproduction.md quotes to DIR/<fig>.json. `--only fig2a,fig4a` picks some;
+that docs/explanation/validation.md quotes to DIR/<fig>.json. `--only fig2a,fig4a` picks some;
 `--set key=value` applies to every scene (e.g. --set rod.elements=60 for a quick look);
 `--replot` redraws from existing .h5 files without simulating.
 

@@ -4,7 +4,7 @@
     rodphase sweep fig3_paths -o out/paths.h5 --jobs 2
     python studies/hold_budget.py out/paths.h5
 
-Reads the per-stage reports every run stores (docs/data-format.md, `diagnostics.stages`).
+Reads the per-stage reports every run stores (docs/reference/data-format.md, `diagnostics.stages`).
 A run of the paths sampler is one dynamic run split into its samples, each of which carries
 the stage list up to its own hold; the run is counted once (its longest list). Work is in
 element-steps (steps × elements: the kernel's cost per step grows with the elements), rod

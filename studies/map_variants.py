@@ -4,7 +4,7 @@ it ships: the paper's claims of issue #29 item 4 (shear, G, damping, friction, t
 the contact thinning force that item 1 found behind the map's failures.
 
     python studies/map_variants.py VARIANT [VARIANT ...] [--samples 200] [--jobs 2]
-        [--out out/variants] [--write docs/reproduction.md] [--figure docs/img/X.png]
+        [--out out/variants] [--write docs/history/fig3-corner.md] [--figure docs/img/X.png]
         [--set KEY=VALUE ...]
 
 Each variant is the shipped configs/fig3_paper.yaml with a few keys set (VARIANTS below); the
@@ -58,7 +58,7 @@ def variants() -> dict[str, tuple[str, list[str]]]:
         "friction_0.2": ("friction μ = 0.2", ["physics.friction=0.2"]),
         "friction_0.5": ("friction μ = 0.5", ["physics.friction=0.5"]),
         # the contact spring's pull along thinning elements, which PyElastica's contact has
-        # not (docs/reproduction.md, "The four against the authors' code")
+        # not (docs/history/fig3-corner.md, "The four against the authors' code")
         "no_thinning": ("no contact thinning force", ["contact.thinning_force=false"]),
         # the straight start is the paper law's; this law starts from rest
         "neo_hookean": ("neo-Hookean law", ["material.law=neo_hookean",

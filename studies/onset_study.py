@@ -7,7 +7,7 @@ boundary, the straight rod's loss of stability, without a sweep:
 
     python studies/onset_study.py                     # table to stdout, n = 80
     python studies/onset_study.py --write             # also docs/img/onset_study.png and the
-                                                      # table block of docs/reproduction.md
+                                                      # table block of docs/history/onset.md
     make onset-study                                  # the same as --write
 
 Variants: the paper's rod; its shear stiffness (4GA/3) × 10 and × 100; G = E/3 (the textbook
@@ -99,7 +99,7 @@ def main(argv=None) -> int:
     parser.add_argument("--extensions", default="1.0,1.05,1.1,1.15,1.2,1.25,1.3")
     parser.add_argument("--write", action="store_true",
                         help="write docs/img/onset_study.png and the docs table block")
-    parser.add_argument("--docs", default=str(ROOT / "docs" / "reproduction.md"))
+    parser.add_argument("--docs", default=str(ROOT / "docs" / "history" / "onset.md"))
     parser.add_argument("--figure", default=str(ROOT / "docs" / "img" / "onset_study.png"))
     args = parser.parse_args(argv)
     extensions = [float(v) for v in args.extensions.split(",")]

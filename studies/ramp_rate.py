@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Fig 3's twist ramp faster: labels and cost at several twist rates against a fine reference.
 
-    python studies/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/performance.md]
+    python studies/ramp_rate.py [--samples 40] [--rates 0.5,1,2,4] [--jobs 2] [--write docs/history/performance.md]
         [--out out/ramp] [--set KEY=VALUE ...]
 
 Most of a Fig 3 sweep's steps are in the twist ramp (81 % of 40 M at 0.5 turns/s, issue #16).
@@ -17,7 +17,7 @@ all coarse).
 
 Since 2026-12-03 the config starts its runs on the straight branch (loading.quasi_static_below
 0.8), so the rate variants ramp from 0.8 of the buckling twist; the reference keeps the whole
-protocol. The table in docs/performance.md was measured before, with the whole protocol in
+protocol. The table in docs/history/performance.md was measured before, with the whole protocol in
 every row (to repeat it, add "loading.quasi_static_below=0" to each rate's sets in main()).
 """
 

@@ -13,7 +13,7 @@ damaged HDF5 file can crash the reader, and that crash is then a finding, not th
 the harness.
 
     python studies/robustness.py                       # every case, 60 kill points
-    python studies/robustness.py --kills 60 --write docs/robustness.md
+    python studies/robustness.py --kills 60 --write docs/explanation/robustness.md
     python studies/robustness.py --cases kill-9-during-write memory-300-runs
 
 tests/test_robustness.py imports this file (importlib, by path) and runs each case as one
@@ -1428,6 +1428,13 @@ def main(argv=None) -> int:
         from rodphase.studytools import write_block
 
         write_block(args.write, "robustness", text)
+        if args.cases is None:  # the whole corpus: its row of the current figures
+            from rodphase.studytools import record_current
+
+            tries, right = sum(r.tried for r in rows), sum(r.right for r in rows)
+            record_current("robustness", f"{len(rows)} rows, {tries} tries, {right} right; "
+                           f"{total:.0f} s ({args.kills} kill points, seed {args.seed})",
+                           source="`make robustness`")
     if args.workdir is None:
         shutil.rmtree(workdir, ignore_errors=True)
     return 0 if all(r.passed or r.case.startswith("kill-9: no worker") for r in rows) else 1

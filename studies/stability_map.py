@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Stability map: the largest time step explicit stepping survives, against the automatic bound.
 
-    python studies/stability_map.py [--steps 4000] [--write docs/performance.md] [--quick]
+    python studies/stability_map.py [--steps 4000] [--write docs/history/performance.md] [--quick]
 
 For every (n, E, damping) the largest stable dt is found by bisection on f = dt / bound, where
 bound = rodphase.rod.stable_time_step (rodphase steps at dt = safety × bound, safety 0.5 by

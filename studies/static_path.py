@@ -3,7 +3,7 @@
 
     python studies/static_path.py [--elements 64] [--force-multiple 25] [--start 0.9]
         [--stop 1.0] [--step 0.005] [--soft-modes 2] [--compare 1.0 ...]
-        [--write docs/performance.md]
+        [--write docs/history/performance.md]
 
 The kernel runs the scene (scenes/twist_under_load.yaml at the given elements and load,
 twisted at 1 turn/s to Φa = --start, held at most 8 s: the state tests/test_static.py

@@ -2,7 +2,7 @@
 """Fig 3 with and without the quasi-static straight start: cost, and how much the results move.
 
     python studies/straight_start.py [--samples 200] [--rounds 2] [--variants 0,0.8]
-        [--set KEY=VALUE ...] [--reference out/perf/fig3_ref.h5] [--write docs/performance.md]
+        [--set KEY=VALUE ...] [--reference out/perf/fig3_ref.h5] [--write docs/history/performance.md]
         [--out out/straight]
 
 Each variant is `rodphase sweep configs/fig3_paper.yaml --set loading.quasi_static_below=S`

@@ -8,7 +8,7 @@ hold, then holds that final shape again from rest for --hold seconds (4), with t
 and contact, under variants of the model, and prints the kinetic energy averaged over each
 quarter of that hold (each second of the 4 s). `--set` changes the scene (a smoke test makes
 it coarse and short).
-A variant whose energy decays to round-off does not feed the vibration (docs/reproduction.md,
+A variant whose energy decays to round-off does not feed the vibration (docs/history/holds-and-laws.md,
 "Holds under contact").
 """
 

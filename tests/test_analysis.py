@@ -249,3 +249,52 @@ def test_twist_density_and_stage_rows():
     assert np.allclose(A.twist_density(r), expected, rtol=1e-15)
     assert A.stage_rows(r, "twist").tolist() == [False, False, True, True, True]
     assert A.stage_rows(r, "load").tolist() == [True, True, False, False, False]
+
+
+# ------------------------------------------------- writhe steps (issue #49), at the cross-check's sampling
+
+
+def _sampled(y_of_t, t0=60.0, t1=80.0, dt=0.5, noise=0.0, seed=0):
+    t = np.arange(t0, t1 + 1e-9, dt)
+    rng = np.random.default_rng(seed)
+    return t, y_of_t(t) + noise * rng.standard_normal(len(t))
+
+
+def test_writhe_steps_counts_a_staircase_of_loops():
+    # four loops of 0.7, 0.6, 0.5, 0.5 turns 2-3 s apart (PyElastica's SolenoidsCase), each
+    # over ~1 s, on a slow drift, with 0.01 turn of noise: four steps, each its own gain
+    at, gains = (66.0, 67.3, 69.4, 74.0), (0.7, 0.6, 0.5, 0.5)
+    t, wr = _sampled(lambda t: 0.005 * (t - 60) + sum(g * 0.5 * (1 + np.tanh((t - c) / 0.3))
+                                                       for c, g in zip(at, gains)), noise=0.01)
+    steps = A.writhe_steps(t, wr)
+    assert len(steps) == 4
+    assert [s["at"] for s in steps] == pytest.approx(at, abs=0.6)
+    assert [s["gain"] for s in steps] == pytest.approx(gains, abs=0.15)
+
+
+def test_writhe_steps_sees_a_collapse_as_one_step():
+    # 2.2 turns in ~1.5 s, no slower stretch inside: one step of the whole gain
+    t, wr = _sampled(lambda t: 2.2 * 0.5 * (1 + np.tanh((t - 69.0) / 0.6)), noise=0.01)
+    steps = A.writhe_steps(t, wr)
+    assert len(steps) == 1
+    assert steps[0]["gain"] == pytest.approx(2.2, abs=0.15)
+    assert steps[0]["to_value"] == pytest.approx(2.2, abs=0.05)
+
+
+def test_writhe_steps_finds_none_on_smooth_ramps():
+    # a steady conversion, slow or fast (up to 0.5 turns per sample), noisy or not: no step
+    for slope in (0.05, 0.3, 1.0):
+        for noise in (0.0, 0.01):
+            t, wr = _sampled(lambda t: slope * (t - 60), noise=noise, seed=3)
+            assert A.writhe_steps(t, wr) == [], (slope, noise)
+
+
+def test_writhe_steps_ignores_rises_below_the_threshold_and_counts_losses():
+    t, wr = _sampled(lambda t: sum(0.2 * 0.5 * (1 + np.tanh((t - c) / 0.3)) for c in (64, 68, 72)))
+    assert A.writhe_steps(t, wr) == []  # 0.2 < 0.3 turns
+    assert len(A.writhe_steps(t, wr, min_step=0.15)) == 3
+    t, wr = _sampled(lambda t: 4.0 - sum(0.65 * 0.5 * (1 + np.tanh((t - c) / 0.3)) for c in (64, 72)))
+    losses = A.writhe_steps(t, wr, direction=-1)
+    assert len(losses) == 2 and losses[-1]["to_value"] == pytest.approx(2.7, abs=0.05)
+    with pytest.raises(ValueError, match="direction"):
+        A.writhe_steps(t, wr, direction=0)

@@ -1,6 +1,6 @@
-"""The package's shape, checked from its own source: the layers of the README ("Layout"), no
-import that points back up (which also rules out every import cycle), and no function too
-long to read as one page.
+"""The package's shape, checked from its own source: the layers of
+docs/explanation/architecture.md, no import that points back up (which also rules out every
+import cycle), and no function too long to read as one page.
 
 Imports are read with `ast`, the deferred ones inside functions included: an import made
 late to save start-up time is still a dependency.
@@ -26,14 +26,16 @@ LAYERS = [
     # the rod engine: compiled laws, the time-stepping kernel, its driver and the static side
     ["rod._jit", "rod.rotation", "rod.contact", "rod.neo_hookean", "rod.kernel",
      "rod.model", "rod.static", "rod.simulate", "rod", "theory", "rod.onset"],
+    # the config's words, validated (it reads only units): a table reads a store's config
+    ["config"],
     # reading a finished shape: link/twist/writhe, alignment, labels, tables of labels
     ["topology", "analysis", "classify", "tabulate"],
-    # from the config's words to a scene the engine can run
-    ["config", "scenes"],
+    # from the config to a scene the engine can run
+    ["scenes"],
     # the store, and starting a run from a stored state
     ["store", "restart"],
-    # running: one scene, one path of the map, a sweep of many
-    ["runner", "paths", "sweep"],
+    # running: one scene, one path of the map, a sweep of many, the lines traced by runs
+    ["runner", "paths", "sweep", "boundaries"],
     # drawing
     ["plot"],
     # what users call: the Python API, the helpers of studies/, the CLI, the package

@@ -400,16 +400,26 @@ def test_the_critical_twist_of_a_known_boundary_and_its_fit():
     assert critical_twist(_known_boundary(), "phi_a_rest", above=1.25).attrs["fit"] is None
 
 
-def test_the_phase_map_draws_the_measured_critical_twist_and_its_fit(no_files):
-    from rodphase.tabulate import critical_twist
-
-    table = _known_boundary(samples=400)
-    critical = critical_twist(table, "phi_a_rest")
-    slope, intercept, r2, *_ = critical.attrs["fit"]
-    fig = plot.phase_map(table, twist="phi_a_rest", critical=critical)
-    legend = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert "critical twist, measured" in legend
-    assert f"fit: {slope:.2f}·L/L0 − {-intercept:.2f}, R² {r2:.2f}" in legend
-    fit_line = [line for line in fig.axes[0].get_lines() if line.get_label().startswith("fit")][0]
-    x, y = fit_line.get_data()
-    assert x[0] > 1.1 and np.allclose(y, slope * np.asarray(x) + intercept)
+def test_the_phase_map_draws_traced_boundaries_and_a_legend_that_fits(no_files):
+    # a boundaries table (boundaries.lines' columns): the plectoneme-solenoid line with its
+    # brackets as a band, the triple point with its error bars; the legend's columns are as
+    # many as fit across the figure, so that no entry is cut at its edges
+    table = _known_boundary(samples=100)
+    lines = pd.DataFrame({
+        "kind": ["plectoneme_solenoid", "plectoneme_solenoid", "triple_point"],
+        "extension": [1.12, 1.11, 1.13], "twist_density": [2.0, 2.4, 1.9],
+        "extension_low": [1.115, 1.105, 1.12], "extension_high": [1.125, 1.115, 1.14],
+        "twist_density_low": [2.0, 2.4, 1.85], "twist_density_high": [2.0, 2.4, 1.95]})
+    fig = plot.phase_map(table, twist="phi_a_rest", lines=lines)
+    legend = fig.legends[0]
+    assert {"plectoneme–solenoid, traced", "triple point"} <= {t.get_text() for t in
+                                                              legend.get_texts()}
+    traced = [line for line in fig.axes[0].get_lines()
+              if line.get_label() == "plectoneme–solenoid, traced"][0]
+    assert list(traced.get_ydata()) == [2.0, 2.4]  # in twist order
+    fig.canvas.draw()
+    box = legend.get_window_extent()
+    width = fig.get_window_extent().width
+    assert box.x0 >= 0 and box.x1 <= width
+    assert plot.legend_columns(["a" * 60] * 6, 5.6, 9) == 1
+    assert plot.legend_columns(["short"] * 6, 5.6, 9) == 4

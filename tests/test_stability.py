@@ -2,7 +2,7 @@
 
 LIMIT holds the largest stable dt / stable_time_step measured by studies/stability_map.py
 (bisection to 0.5 %, 4000 steps from a straight rod perturbed by strains of ~1e-3, clamped at
-node 0, free at node n; see docs/performance.md). The limit does not depend on E (all rates
+node 0, free at node n; see docs/history/performance.md). The limit does not depend on E (all rates
 scale with √(E/ρ)), so the table is by n. Each test runs a few thousand steps of a small rod:
 well under a second once numba's cache is warm.
 """
@@ -27,7 +27,7 @@ from rodphase.rod import (
 )
 
 # largest stable dt / bound, undamped (damping, rotational damping and quadratic drag 0),
-# measured on this code (docs/performance.md, "Stability map")
+# measured on this code (docs/history/performance.md, "Stability map")
 LIMIT = {20: 0.930, 50: 0.879, 100: 0.902, 200: 0.945}
 STEPS = 4000
 UNDAMPED = {"damping": 0.0, "rotational_damping": 0.0, "quadratic_drag": 0.0}

@@ -231,7 +231,7 @@ def test_a_continuation_step_in_twist_reuses_the_corrector_factorization(settled
     # reused one: chord steps), residual 7e-9 outside the soft modes, writhe up by 0.005 of
     # the 0.032 turns of link added. A state this close is the regime a continuation runs
     # in; with 5× the step the corrector on this solenoid fails at the fourth step
-    # (docs/performance.md, "A twist continuation beside the soft modes").
+    # (docs/history/performance.md, "A twist continuation beside the soft modes").
     import dataclasses
 
     from rodphase import topology

@@ -343,7 +343,7 @@ def _demo_like_store(path):
 def test_the_reading_examples_of_the_data_format_page_run_as_written(tmp_path, monkeypatch):
     import re
 
-    page = (Path(__file__).parent.parent / "docs" / "data-format.md").read_text()
+    page = (Path(__file__).parent.parent / "docs" / "reference" / "data-format.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", page[page.index("## Reading without"):], re.S)
     assert len(blocks) == 3
     monkeypatch.chdir(tmp_path)

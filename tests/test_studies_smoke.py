@@ -456,3 +456,17 @@ def test_energy_audit_stretch_power_is_what_the_law_adds_to_the_stretch_energys_
             assert abs(power + rate - (expected if incompressible else 0.0)) <= tolerance, (
                 seed, incompressible)
         assert abs(expected) > 1e3 * tolerance
+
+
+def test_twist_into_writhe_runs_a_row_a_moment_and_tabulates_it(tmp_path, capsys):
+    # make twist-into-writhe: rodphase's rows of the SolenoidsCase, one change at a time,
+    # against the cached PyElastica references; here one row, 0.1 s of it
+    tiw = study("twist_into_writhe")
+    assert tiw.main(["rows", "solenoid", "--only", "no_thinning", "--final-time", "0.1",
+                     "--out", str(tmp_path)]) == 0
+    assert tiw.main(["table", "solenoid", "--out", str(tmp_path), "--png", str(tmp_path / "t.png")]) == 0
+    out = capsys.readouterr().out
+    assert "| rodphase: thinning force off" in out
+    # the stored PyElastica SolenoidsCase: four steps (loops) in its twist
+    assert re.search(r"^\| PyElastica 1\.0 \| ok \| 0 \| 66\.0 \| 4 \|", out, re.M)
+    assert (tmp_path / "t.png").stat().st_size > 10_000

@@ -324,10 +324,24 @@ def test_an_under_resolved_run_is_run_again_with_more_elements():
     assert refined.status == "ok", refined.message
     assert refined.diagnostics["elements"] == 48 and refined.positions.shape == (49, 3)
     assert refined.diagnostics["refined_from"] == [12, 24]
-    assert refined.diagnostics["wall_time_before_refining"] > 0
     assert "under-resolved at 12, 24 elements" in refined.diagnostics["notes"][-1]
+    # the run's cost is every attempt's: 12 elements from the start, then 24 and 48, each
+    # from a second before the coarser one's trip (solver.refine_from: trip)
+    attempts = refined.diagnostics["attempts"]
+    assert [a["elements"] for a in attempts] == [12, 24, 48]
+    assert attempts[0]["start"] == "start"
+    assert all(a["start"].startswith("t = ") for a in attempts[1:])
+    assert [a["guard"] for a in attempts] == ["resolution", "resolution", None]
+    assert refined.diagnostics["steps"] == sum(a["steps"] for a in attempts)
+    assert refined.diagnostics["wall_time"] == pytest.approx(sum(a["wall_time"] for a in attempts))
+    assert all(a["steps"] > 0 and a["wall_time"] > 0 for a in attempts)
     # the same protocol: all the twist asked for (Φa·L0/a of end rotation) went in
     assert refined.history["end_rotation"][-1] == pytest.approx(1.2 * cfg.rod.length / cfg.rod.radius)
+    # the limit as doublings of the scene's count: two of 12 are 48, and no more
+    doubled = run_scene(C.load_scene("twist_under_load", overrides + [("solver.refinements", 2)],
+                                     SCENES).plain())
+    assert doubled.diagnostics["elements"] == 48
+    assert [a["elements"] for a in doubled.diagnostics["attempts"]] == [12, 24, 48]
 
 
 def test_outputs_may_go_into_folders_that_do_not_exist_yet(tmp_path):
@@ -477,7 +491,8 @@ def test_a_run_stopped_while_its_end_turns_too_fast_is_run_again_slower():
     slowed = run_scene(cfg.plain())
     assert slowed.status == "ok", slowed.message
     assert slowed.diagnostics["twist_rates_tried"] == [32.0, 16.0, 8.0]
-    assert slowed.diagnostics["wall_time_before_refining"] > 0
+    assert [a["twist_rate"] for a in slowed.diagnostics["attempts"]] == [32.0, 16.0, 8.0]
+    assert slowed.diagnostics["steps"] == sum(a["steps"] for a in slowed.diagnostics["attempts"])
     assert "resolution guard stopped it at 48 elements while an end turned at 16 turns/s" \
         in slowed.diagnostics["notes"][-1]
     assert slowed.history["end_rotation"][-1] == pytest.approx(1.0 * cfg.rod.length / cfg.rod.radius)
@@ -488,3 +503,8 @@ def test_a_run_stopped_while_its_end_turns_too_fast_is_run_again_slower():
                                    overrides + [("solver.slow_down_to", 16.0)], SCENES).plain())
     assert floor.status == "unstable" and floor.diagnostics["twist_rates_tried"] == [32.0, 16.0]
     assert floor.diagnostics["guard"] == "resolution"
+    # its advice names what is left, not the slower twist it already had
+    assert "lower loading.twist_rate" not in floor.message
+    assert "Already tried: 2 attempts" in floor.message and "down to 16 turns/s" in floor.message
+    assert floor.diagnostics["wall_time"] == pytest.approx(
+        sum(a["wall_time"] for a in floor.diagnostics["attempts"]))

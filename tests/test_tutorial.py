@@ -1,11 +1,11 @@
-"""docs/tutorial.ipynb runs as shipped: every code cell, in order, in one namespace."""
+"""docs/tutorials/tutorial.ipynb runs as shipped: every code cell, in order, in one namespace."""
 
 import json
 from pathlib import Path
 
 import matplotlib
 
-NOTEBOOK = Path(__file__).parent.parent / "docs" / "tutorial.ipynb"
+NOTEBOOK = Path(__file__).parent.parent / "docs" / "tutorials" / "tutorial.ipynb"
 
 
 def test_the_tutorial_notebook_runs(tmp_path, monkeypatch):

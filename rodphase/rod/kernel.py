@@ -21,40 +21,22 @@ loop; damping multiplies velocities by exp(-ν·dt), which is stable for any ν 
 applied before the boundary conditions so that prescribed motions are exact.
 
 The functions advance calls on every step are inlined into it (inline="always", at numba's
-IR level), so that their machine code exists once. A callee compiled on its own is linked into
-advance as a linkonce_odr copy that LLVM optimises again with advance; a process that compiles
-advance then binds the call to the callee's own copy, one that loads advance from numba's disk
-cache to the linked copy, and with fastmath the two differed in the last bits (up to 1e-12 m
-on the reference scenes, tests/test_kernel_cache.py). The functions that run at most at check
-steps (_guards, _shear_guard, _record, _settle_windows, _stop_test with _probe_distance and
-_start_probe) or once per call (_work_arrays, _report) are compiled on their own instead
-(inline="never"): every inlined call site is IR that numba types and lowers again inside
-advance (all but _stop_test, inlined, cost 12 s of its first compile: 60 → 48 s,
-benchmarks/compile_time.py functions). Their results are the inlined ones to the bit,
-compiled fresh or loaded from the cache (positions, directors, history and snapshots of the
-reference scenes, benchmarks/reference_positions.py; tests/test_kernel_cache.py). Taken out
-the same way, _drift, rotated_frame, _kinetic_energy and the per-step loads were not: their
-last bits moved. The arrays the per-step loads and the kick work in come from _step_arrays,
-inlined, so that they are advance's own fresh allocations to LLVM: made in _work_arrays, the
-recorded kinetic energy moved in its last bit (1e-17 J on the reference scenes; positions
-unchanged), LLVM optimising the loop that sums it otherwise.
+IR level), so that their machine code exists once: a kernel loaded from numba's disk cache
+then gives the same bits as a fresh compile (tests/test_kernel_cache.py). The functions that
+run at most at check steps (_guards, _shear_guard, _record, _settle_windows, _stop_test with
+_probe_distance and _start_probe) or once per call (_work_arrays, _report) are compiled on
+their own instead (inline="never"), which shortens advance's first compile; their results
+are the inlined ones to the bit (benchmarks/reference_positions.py). The per-step pieces
+(_drift, rotated_frame, _kinetic_energy, the loads) stay inlined, and the arrays they work in
+come from _step_arrays, inlined, so that LLVM sees them as advance's own allocations.
 
-Why the step loop is written out in advance rather than a page of calls (issue #27; measured
-2026-12-06 on a 2-core AMD EPYC, docs/studies/performance-history.md):
-- Bits: with fastmath's 'reassoc' (_jit.FASTMATH), LLVM reorders sums by the shape of the
-  code around them. The clamp block moved into an inlined helper moved 75 of the 161
-  reference arrays (1e-14 m, and 4e-8 relative after the 500 k-step buckling hold). Without
-  'reassoc' the same move, and the whole loop split into helpers, was bit-identical, but
-  dropping it costs 2-4 % per step without contact (the energy sums stop vectorising).
-- Time: each helper in the loop costs time of its own. numba counts references to every
-  array an inlined helper binds (a record such as `rod` binds all of its arrays), and its
-  refcount pruning leaves the increments and decrements around an inlined body with branches
-  (numba issues 2345, 2350): static NRT_incref sites in advance 116 → 201 with the loop
-  split. The clamp block alone as a helper cost 6 % per step without contact; the loads and
-  the kick as helpers 10-18 %, where the issue allows 3 %.
-Only the setup and the end left advance (_drag_rates, _step_arrays, _work_arrays, _report),
-and contact's counters travel as one record of scalars (ContactState): bit-identical with
-'reassoc', 0.99-1.02 per step.
+The step loop is written out in advance rather than as a page of helper calls: with
+fastmath's 'reassoc' (_jit.FASTMATH) LLVM reorders sums by the shape of the code around them,
+so moving a block into a helper moves the results' last bits, and every inlined helper that
+binds arrays adds reference counting that costs time per step. Only the setup and the end
+are pieces of their own (_drag_rates, _step_arrays, _work_arrays, _report), and contact's
+counters travel as one record of scalars (ContactState). The measurements behind these
+choices, with their dates: docs/history/kernel-speed.md.
 """
 
 from collections import namedtuple
@@ -259,7 +241,7 @@ GUARDS = {
                    "its tangent)", "element",
                    # Fig 3's runaways at Φa >= 2.41 trip at any resolution, step or twist
                    # rate, an element of a strand stretched to 1.8-2.1 while the law's
-                   # 1/e³ bend couple feeds the motion (docs/reproduction.md, "Where the
+                   # 1/e³ bend couple feeds the motion (docs/history/fig3-corner.md, "Where the
                    # corner's failures get their energy"): the step advice alone sent users
                    # the wrong way
                    "If it trips here at any step and resolution (a runaway of the Cosserat "
@@ -1074,7 +1056,7 @@ def _settle_windows(x, Q, t, drag_radius, settle_window, settle_distance, equili
     at every check; the shape has settled when two consecutive window means agree and within
     the window no point strayed from its mean (rms) by more than the same distance.
     Averaging is what lets a hold end under contact: there a standing vibration (~390 Hz,
-    amplitude ~0.2 % of the radius, see docs/reproduction.md) keeps the residual above any
+    amplitude ~0.2 % of the radius, see docs/history/holds-and-laws.md) keeps the residual above any
     useful tolerance although the shape no longer changes. The spread test keeps a slow,
     large oscillation whose period matches the window from passing as settled.
     Returns (window_count, window_start, have_mean, settle_motion, settled)."""

@@ -214,7 +214,7 @@ class Contact:
     # on the radii, a0/√e for an incompressible rod, so this is the rest of the gradient of the
     # contact energy ½kδ² (with it, contact does no work on a stretching rod). PyElastica's
     # contact, the paper's, has none; off, rodphase's tight braids stretch as PyElastica's
-    # (docs/reproduction.md, "The four against the authors' code"). Only an incompressible rod
+    # (docs/history/fig3-corner.md, "The four against the authors' code"). Only an incompressible rod
     # thins: for any other it changes nothing.
     thinning_force: bool = setting(True)
     # Contact sleeps until the rod first touches itself (a pair, a fold) or an end body: until

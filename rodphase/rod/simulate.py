@@ -675,7 +675,7 @@ def _verdict(problem: Problem, plan: _StagePlan, outcome: _Outcome, clock: _Cloc
         value = f"value {info[k.D_VALUE]:.3g}"
         if code == k.S_SHEAR and 0 <= where < n:
             # a sheared element is usually a stretched one too; how far says whether the
-            # law's range is at stake (docs/reproduction.md, "Where the corner's failures
+            # law's range is at stake (docs/history/fig3-corner.md, "Where the corner's failures
             # get their energy": 1.8-2.1 at Fig 3's five trips)
             stretch = (np.linalg.norm(np.diff(state.x, axis=1), axis=0)
                        / problem.rod.element_length)

@@ -34,10 +34,10 @@ an isolated equilibrium. What is left of the residual lies along one or two soft
 `solve_beside_soft_modes` leaves the eigen-directions of the mass-weighted stiffness nearest
 zero out of the Newton step, and from the kernel's settled solenoid and plectoneme (n = 64 and 80)
 the rest converges to 1e-8 in 9-13 steps while the state moves by 0.013-0.033 radii; the force
-left along the soft modes is reported (docs/performance.md, "A static corrector beside
+left along the soft modes is reported (docs/history/performance.md, "A static corrector beside
 the soft modes"). Stepped in twist from there (`twisted_further` as the predictor), the
 corrector follows such a shape for 0 to 0.1 of Φa only: the shape takes up twist along the
-modes the corrector leaves out (docs/performance.md, "A twist continuation beside the soft
+modes the corrector leaves out (docs/history/performance.md, "A twist continuation beside the soft
 modes").
 
 Unknowns (`StaticModel.unknowns`):
@@ -422,7 +422,7 @@ def contact_stiffness(model: StaticModel, x: np.ndarray) -> np.ndarray:
     n = x.shape[1] - 1
     pairs = candidate_pairs(model, x)
     # reach[a, b]: moving node a changes the contact force on node b (boolean arrays: with
-    # Python sets a call took 54-65 ms at n = 80, with these 14-15 ms, docs/performance.md)
+    # Python sets a call took 54-65 ms at n = 80, with these 14-15 ms, docs/history/performance.md)
     nodes = np.arange(n + 1)
     if model.fold:
         reach = np.abs(nodes[:, None] - nodes[None, :]) <= model.exclusion + 1
@@ -593,9 +593,7 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
     if not len(negative):
         return Stability(True, 0, lowest, "eigenvalues")
     worst = int(np.argmin(values.real))
-    vector = (vectors[:, worst] * scale).real
-    if not np.any(vector):
-        vector = (vectors[:, worst] * scale).imag
+    vector = (_fixed_phase(vectors[:, worst]) * scale).real
     n = Q.shape[2]
     m = model.positions
     mode = np.zeros((n + 1, 3))
@@ -612,6 +610,27 @@ def stability(model: StaticModel, x: np.ndarray, Q: np.ndarray,
 NEAR_ZERO = 6
 
 
+# ARPACK starts from a random vector unless given one, and its eigenvectors (their phase, and
+# the basis it picks in a degenerate pair's plane) follow that start: the stability push of a
+# hold took its direction from them, so the same run ended straight in one process and as a
+# solenoid in another (issue #46). A fixed, generic start makes every solve a function of A.
+ARNOLDI_START_SEED = 46
+
+
+def _arnoldi_start(size: int) -> np.ndarray:
+    """(size,) the fixed start vector of every Arnoldi solve: seeded normal entries, so that
+    it has a component on any mode (a constant vector can miss one by symmetry)."""
+    return np.random.default_rng(ARNOLDI_START_SEED).standard_normal(size)
+
+
+def _fixed_phase(vector: np.ndarray) -> np.ndarray:
+    """An eigenvector with its arbitrary phase (sign, for a real one) fixed: turned so that
+    its largest entry is real and positive. Its real part is then the same direction whichever
+    solver, start or thread count produced it."""
+    largest = vector[int(np.argmax(np.abs(vector)))]
+    return vector * (abs(largest) / largest) if largest != 0 else vector
+
+
 def _eigenvalues_near_zero(A: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     """The NEAR_ZERO eigenvalues of A nearest zero and their vectors: shift-invert Arnoldi on
     a sparse LU (A is banded in rod order; O(N) per solve), or every eigenvalue of a small A.
@@ -622,7 +641,8 @@ def _eigenvalues_near_zero(A: np.ndarray, size: int) -> tuple[np.ndarray, np.nda
     from scipy.sparse import csc_matrix
     from scipy.sparse.linalg import eigs
 
-    return eigs(csc_matrix(A), k=NEAR_ZERO, sigma=0.0, which="LM", tol=1e-10)
+    return eigs(csc_matrix(A), k=NEAR_ZERO, sigma=0.0, which="LM", tol=1e-10,
+                v0=_arnoldi_start(size))
 
 
 def displaced(x: np.ndarray, Q: np.ndarray, mode: np.ndarray, rotation: np.ndarray,
@@ -820,9 +840,10 @@ def soft_factorization(model: StaticModel, x: np.ndarray, Q: np.ndarray,
         inverse = LinearOperator((N, N), matvec=lu.solve, dtype=float)
         inverse_t = LinearOperator((N, N), matvec=lambda b: lu.solve(b, trans="T"),
                                    dtype=float)
-        values, right = eigs(A, k=soft_modes, sigma=0.0, OPinv=inverse, which="LM", tol=1e-8)
+        values, right = eigs(A, k=soft_modes, sigma=0.0, OPinv=inverse, which="LM", tol=1e-8,
+                             v0=_arnoldi_start(N))
         _, left = eigs(A.T.tocsc(), k=soft_modes, sigma=0.0, OPinv=inverse_t, which="LM",
-                       tol=1e-8)
+                       tol=1e-8, v0=_arnoldi_start(N))
     right, left = _real_basis(right, soft_modes), _real_basis(left, soft_modes)
     bordered = splu(bmat([[A, csc_matrix(left)], [csc_matrix(right.T), None]], format="csc"))
     order = np.argsort(-np.abs(values))  # smallest last
@@ -876,7 +897,7 @@ def solve_beside_soft_modes(model: StaticModel, x: np.ndarray, Q: np.ndarray, *,
     (eigenvalues of A from −5 to 500 s⁻² where its largest is ~1e8: the loops creep or
     slide), and plain Newton (`solve`) takes huge steps along them and stalls. Left out, the
     rest converges quadratically, and what remains is a force along the soft modes alone,
-    reported (`soft_residual`), not hidden (measured: docs/performance.md, "A static
+    reported (`soft_residual`), not hidden (measured: docs/history/performance.md, "A static
     corrector beside the soft modes").
 
     Each step solves the bordered system of `soft_factorization` (sparse LU) for the loads.
