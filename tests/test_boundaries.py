@@ -84,6 +84,7 @@ def test_a_level_without_a_boundary_and_the_triple_point_between_levels():
 
 # ---------------------------------------------------------------- the onset line, static
 
+@pytest.mark.slow  # long: 31 s of CPU (62 s wall at load 4 on 2 cores)
 def test_the_onset_line_is_the_models_own_stability_to_its_tolerance():
     from rodphase.rod.onset import StraightBranch
     from rodphase.scenes import rod_from

@@ -80,6 +80,7 @@ def stored_positions(path) -> dict:
         return {rid: fingerprint(store.read_run(rid).positions) for rid in store.run_ids()}
 
 
+@pytest.mark.slow  # long: 29 s of CPU, three sweeps and a kill (67 s wall at load 4)
 def test_a_near_onset_sweep_is_the_same_on_one_or_two_jobs_and_killed_and_resumed(tmp_path):
     sweep = near_onset_sweep(tmp_path)
     one, two, killed = tmp_path / "one.h5", tmp_path / "two.h5", tmp_path / "killed.h5"
