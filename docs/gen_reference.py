@@ -86,7 +86,10 @@ def cli_page() -> str:
     from rodphase.cli import main
 
     # a fixed width, so that the page does not depend on the terminal that renders it
-    root = click.Context(main, info_name="rodphase", terminal_width=88, max_content_width=88)
+    # and the group's own context settings (-h, --help), inherited by every command: without
+    # them the page depended on whether a CLI call had run in the same process before
+    root = click.Context(main, info_name="rodphase", terminal_width=88, max_content_width=88,
+                         **main.context_settings)
     out = ["# Commands", "",
            "Generated from the click commands of `rodphase.cli` by `docs/gen_reference.py`: "
            "each section is that command's `--help`. Exit statuses: "
