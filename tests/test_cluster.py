@@ -300,6 +300,9 @@ def test_a_sweep_that_refuses_to_start_creates_nothing(tmp_path, args, words):
                              str(tmp_path / "new" / "out.h5"), "--quiet", *args],
                             env=ENV, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2, result.stderr
-    assert result.stderr.strip().splitlines() == [result.stderr.strip()]  # one line
-    assert result.stderr.startswith(words), result.stderr
+    # one error line (the tiny rod's resolution warning is not an error)
+    said = [line for line in result.stderr.strip().splitlines()
+            if not line.startswith("warning: rod.elements")]
+    assert len(said) == 1, result.stderr
+    assert said[0].startswith(words), result.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.yaml"]
