@@ -555,10 +555,7 @@ def _with_elements(cfg: dict) -> Frozen:
     # was auto's, and is recomputed for the rod as it is now
     auto = rod["elements"] == "auto" or rod["elements_from"] == "auto"
     rod["elements_from"] = "auto" if auto else "given"
-    if auto:
-        rod["elements"] = 8  # a placeholder for elements_needed, which does not read it
-    probe = dict(cfg, rod=Frozen(rod))
-    wanted, least, why = elements_needed(probe)
+    wanted, least, why = elements_needed(cfg)  # reads the rod's size and twist, not its count
     if auto:
         rod["elements"] = wanted
     elif rod["elements"] < least:
