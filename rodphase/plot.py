@@ -30,6 +30,7 @@ from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from . import units
+from .boundaries import MAX_FAILED
 from .result import RunResult, rotation_put_in
 
 DPI = 200
@@ -315,7 +316,8 @@ def boundary_lines(ax, lines: pd.DataFrame) -> list:
     handles = []
     ps = lines[lines["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
     # a bracket that failed runs left wide (the model fails there) is no point of the line
-    wide = ps["failed"].fillna(0) >= 3 if "failed" in ps else pd.Series(False, ps.index)
+    wide = (ps["failed"].fillna(0) >= MAX_FAILED if "failed" in ps
+            else pd.Series(False, ps.index))
     if wide.any():
         handles.append(ax.errorbar(
             ps.loc[wide, "extension"], ps.loc[wide, "twist_density"],
