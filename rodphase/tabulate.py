@@ -228,11 +228,20 @@ def onset_lines(config: dict, extensions) -> pd.DataFrame | None:
         return None
     e = np.asarray(extensions, dtype=float)
 
+    # along the line, each load's onset is first sought near the last one's share of the
+    # unsheared Greenhill twist (that share changes slowly with the load)
+    share = [None]
+
     def model_onset(extension: float) -> float:
+        greenhill = greenhill_turns(rod, extension)
+        near = None if share[0] is None else share[0] * greenhill
         try:
-            return straight_onset_turns(rod, extension, tolerance=1e-4)
+            turns = straight_onset_turns(rod, extension, tolerance=1e-4, near=near)
         except ValueError:  # too few elements to resolve that twist: no line there
+            share[0] = None
             return np.nan
+        share[0] = turns / greenhill
+        return turns
 
     def sheared_onset(extension: float) -> float:
         try:
