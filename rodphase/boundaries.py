@@ -26,6 +26,7 @@ sweep and of the labels of the runs already stored: a killed trace resumes the s
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -39,7 +40,7 @@ KINDS = ("onset", "plectoneme_solenoid", "triple_point", "restraighten")
 
 # columns of the boundaries table (unit, meaning): what --csv writes and the store keeps
 COLUMNS = {
-    "kind": ("", "onset, plectoneme_solenoid or triple_point"),
+    "kind": ("", "onset, plectoneme_solenoid, triple_point or restraighten"),
     "extension": ("1", "L/L0 of the boundary point (the bracket's middle)"),
     "twist_density": ("1", "Phi*a = theta*a0/L0 of the boundary point"),
     "extension_low": ("1", "L/L0 bracket, low side"),
@@ -63,16 +64,23 @@ class Settings:
     levels the first round spreads over the box, `onset_points` the extensions the onset
     line is computed at (relative accuracy `onset_tolerance` in Φa)."""
 
-    tolerance: float = 0.005
-    twist_tolerance: float = 0.05
+    # widths of the brackets: ±0.005 in L/L0 and ±0.05 in Φa about their middles, the
+    # issue's targets; the 200-point map's points are ~0.02 in L/L0 apart
+    tolerance: float = 0.01
+    twist_tolerance: float = 0.1
     levels: int = 6
     onset_points: int = 41
     onset_tolerance: float = 1e-4
+    # --hysteresis: loads along the onset line, and the step down in twist between the holds
+    # of the return, a fraction of the load's onset twist (the restraighten bracket's width)
+    hysteresis_loads: int = 6
+    hysteresis_step: float = 0.025
 
     @classmethod
     def of(cls, sweep) -> Settings:
         given = dict(sweep.get("boundary") or {})
-        return cls(**{k: given[k] for k in ("tolerance", "twist_tolerance", "levels") if k in given})
+        return cls(**{k: given[k] for k in ("tolerance", "twist_tolerance", "levels",
+                                            "hysteresis_loads", "hysteresis_step") if k in given})
 
 
 def check_traceable(sweep) -> None:
@@ -131,6 +139,31 @@ def check_box(onset: pd.DataFrame, sweep) -> None:
                             "and there is no boundary to trace")
 
 
+def check_settings(onset: pd.DataFrame, settings: Settings) -> None:
+    """Refuse a tolerance finer than the runs can tell apart: within classify.ONSET_BAND of
+    the onset a run's label depends on how it was pushed (docs/explanation/
+    reproducibility.md), and the highest run of a level sits `tolerance` below the onset,
+    so `tolerance` must clear that band's width in L/L0 (through the onset's slope), and
+    `twist_tolerance` its width in Φa."""
+    from .classify import ONSET_BAND
+
+    ok = onset["twist_density"].notna()
+    e, phi = onset["extension"][ok].to_numpy(), onset["twist_density"][ok].to_numpy()
+    slope = np.abs(np.gradient(phi, e))
+    band_extension = float(np.max(2 * ONSET_BAND * phi / np.maximum(slope, 1e-12)))
+    band_twist = float(2 * ONSET_BAND * phi.max())
+    if settings.tolerance < band_extension:
+        raise config.ConfigError("sweep.boundary.tolerance", settings.tolerance,
+                                 f"at least {band_extension:.2g} in L/L0: a finer bracket is "
+                                 "inside the onset's band, where a run's label depends on how "
+                                 "it was pushed")
+    if settings.twist_tolerance < band_twist:
+        raise config.ConfigError("sweep.boundary.twist_tolerance", settings.twist_tolerance,
+                                 f"at least {band_twist:.2g} in Phi*a: a finer bracket is inside "
+                                 "the onset's band, where a run's label depends on how it was "
+                                 "pushed")
+
+
 # ---------------------------------------------------------------- bracketing (dynamic)
 
 BUCKLED = ("plectoneme", "solenoid", "mixed")
@@ -147,6 +180,46 @@ class Level:
     low: float  # the box's lowest extension
     high: float  # just below e*: the highest extension that still buckles
     probes: dict[float, str] = field(default_factory=dict)
+    # where a neighbouring level found its boundary: the search starts around it
+    guess: float | None = None
+
+    def first_probes(self, tolerance: float) -> list[float]:
+        """Where the level starts: a tolerance either side of the guess (a boundary runs
+        nearly along the twist axis, so a neighbour's is close), or, with none, the middle of
+        the level. Its top and the box's lowest extension, where runs are slowest (dense
+        plectonemes and the corner settle slowly), are run only if the search needs them."""
+        if self.guess is None:
+            return [0.5 * (self.low + self.high)]
+        return sorted({max(self.low, self.guess - tolerance), min(self.high, self.guess + tolerance)})
+
+    def search(self, tolerance: float) -> float | None:
+        """The next extension while there is no bracket yet, or None. With no solenoid, the
+        level's top (the last extension to buckle): a plectoneme there means no boundary on
+        this level; a failed top is stepped under, half way to the highest buckled run. With solenoids and nothing buckled below the lowest, down from it: half
+        way to the box's lowest extension (no guess), or twice as far as the last step (from
+        a guess); the lowest extension itself once the step reaches it. MAX_FAILED failed
+        runs end the search."""
+        points = self.ordered()
+        if sum(1 for _, p in points if p not in BUCKLED + ("straight",)) >= MAX_FAILED:
+            return None
+        if not any(p == "solenoid" for _, p in points):
+            if self.high not in self.probes:
+                return self.high
+            # the top failed (or stayed straight): between it and the highest buckled run
+            buckled = [e for e, p in points if p in BUCKLED]
+            above = [e for e, p in points if p not in BUCKLED and buckled and e > max(buckled)]
+            if self.probes[self.high] in BUCKLED or not above:
+                return None
+            middle = 0.5 * (max(buckled) + min(above))
+            return middle if min(above) - max(buckled) > tolerance else None
+        lowest = points[0][0]
+        if self.guess is None:
+            below = 0.5 * (self.low + lowest)
+        else:
+            below = lowest - tolerance * 2 ** sum(1 for e, _ in points if e < self.high)
+        if below - self.low < 0.5 * tolerance:
+            below = self.low
+        return below if below not in self.probes and below < lowest else None
 
     def ordered(self) -> list[tuple[float, str]]:
         return sorted(self.probes.items())
@@ -164,22 +237,31 @@ class Level:
         return max(e for e in below if e < b), b
 
     def has_boundary(self) -> bool | None:
-        """True: a solenoid on the level (the boundary lies at or below it); False: both ends
+        """True: a solenoid on the level (the boundary lies at or below it); False: the top
         buckled (plectoneme, mixed) and no solenoid: the plectoneme meets the straight rod;
-        None: an end not yet run, or failed, or straight."""
+        None: the top not yet run, or failed, or straight."""
         if any(p == "solenoid" for p in self.probes.values()):
             return True
-        ends = [self.probes.get(self.low), self.probes.get(self.high)]
-        if all(end in ("plectoneme", "mixed") for end in ends):
+        if self.probes.get(self.high) in ("plectoneme", "mixed"):
             return False
         return None
 
     def next_probes(self, tolerance: float, count: int = 1) -> list[float]:
-        """`count` extensions that split the gap next_probe would halve into count + 1 equal
-        parts (one round of the trace can use every worker when few levels are left), or
-        none once the bracket is narrow enough."""
+        """The extensions of the level's next round, or none once its bracket is narrower
+        than tolerance. With a guess (a neighbour's boundary) inside a bracket still wider
+        than tolerance, half a tolerance either side of it: the boundary runs nearly along
+        the twist axis, so the bracket most often closes at once. Otherwise `count`
+        extensions that split the gap next_probe would halve into count + 1 equal parts (one
+        round of the trace can use every worker when few levels are left)."""
         middle = self.next_probe(tolerance)
-        if middle is None or count <= 1:
+        bracket = self.bracket()
+        if middle is not None and bracket is not None and self.guess is not None:
+            a, b = bracket
+            near = [e for e in (self.guess - 0.5 * tolerance, self.guess + 0.5 * tolerance)
+                    if a + 0.25 * tolerance < e < b - 0.25 * tolerance and e not in self.probes]
+            if near:
+                return near
+        if middle is None or count <= 1 or bracket is None:
             return [] if middle is None else [middle]
         a, b = self.bracket()
         inside = [e for e, _ in self.ordered() if a <= e <= b]
@@ -195,7 +277,7 @@ class Level:
         the paper's law leaves its range) and says so in its row."""
         bracket = self.bracket()
         if bracket is None:
-            return None
+            return self.search(tolerance)
         a, b = bracket
         inside = [e for e, _ in self.ordered() if a <= e <= b]
         if sum(1 for e in inside if self.probes[e] not in BUCKLED) >= MAX_FAILED:
@@ -243,17 +325,21 @@ def run_id(twist: float, extension: float) -> str:
 def _level(index: int, twist: float, onset: pd.DataFrame, sweep, settings: Settings) -> Level:
     lo, hi = sweep.axes["extension"]
     star = onset_extension(onset, twist)
-    # the highest extension that still buckles, a bracket's width below e* (the run there
-    # must not be a marginal straight rod)
-    return Level(index, twist, lo, min(hi, star - settings.tolerance))
+    # the highest extension that still buckles, a quarter bracket below e*: the run there
+    # must not be a marginal straight rod (check_settings keeps that clear of the onset's
+    # band), and near the triple point, where the solenoids are a sliver under the onset,
+    # it must not be far below e* either
+    return Level(index, twist, lo, min(hi, star - 0.25 * settings.tolerance))
 
 
 def first_levels(onset: pd.DataFrame, sweep, settings: Settings) -> list[Level]:
-    """`settings.levels` twists spread evenly between the onset at the box's lowest extension
-    and the box's top (the onset itself excluded: no buckled state there)."""
+    """`settings.levels` twists, each in the middle of an equal slice of the twist range from
+    the onset at the box's lowest extension to the box's top (neither edge: no buckled
+    state at the first, and the second is the box's corner, where a rod is most twisted and
+    stretched and its runs are the slowest and the likeliest to fail)."""
     lowest = float(onset["twist_density"].iloc[0])
     top = sweep.axes["twist_density"][1]
-    twists = lowest + (top - lowest) * np.arange(1, settings.levels + 1) / settings.levels
+    twists = lowest + (top - lowest) * (np.arange(settings.levels) + 0.5) / settings.levels
     return [_level(i, float(t), onset, sweep, settings) for i, t in enumerate(twists)]
 
 
@@ -281,12 +367,13 @@ def boundary_rounds(sweep, scene, store, settings: Settings | None = None,
                                                             "step": float(step)}],
                                           scene_for(scene, point), builder=builder)
 
-    pending = [job(lv, e) for lv in levels for e in (lv.low, lv.high)]
+    pending = [job(lv, e) for lv in levels for e in lv.first_probes(settings.tolerance)]
     while pending:
         unique = {rid: j for rid, *_, j in pending}  # two levels may ask for one point
         yield list(unique.values())
         for rid, level, extension, _ in pending:
             level.probes[extension] = summarize(store.read_run(rid))["phase"]
+        guide(levels, settings.tolerance)
         active = [lv for lv in levels if lv.next_probe(settings.tolerance) is not None]
         # few levels left: split their gaps in more parts, so that every worker has a run
         count = max(1, workers // max(len(active), 1))
@@ -298,10 +385,22 @@ def boundary_rounds(sweep, scene, store, settings: Settings | None = None,
         if gap is not None and gap[1].twist - gap[0].twist > settings.twist_tolerance:
             twist = 0.5 * (gap[0].twist + gap[1].twist)
             new = _level(len(levels), twist, onset, sweep, settings)
+            bracket = gap[1].bracket()
+            new.guess = 0.5 * sum(bracket) if bracket else None
             # a level of unknown state (a failed end) between the two is not run again
             if new.high > new.low and all(abs(lv.twist - twist) > 1e-9 for lv in levels):
                 levels.append(new)
-                pending += [job(new, e) for e in (new.low, new.high)]
+                pending += [job(new, e) for e in new.first_probes(settings.tolerance)]
+
+
+def guide(levels: list[Level], tolerance: float) -> None:
+    """Give every level still open the boundary of the nearest level (in twist) whose bracket
+    is already narrower than tolerance, as its guess."""
+    done = [lv for lv in levels if (b := lv.bracket()) is not None and b[1] - b[0] <= tolerance]
+    for lv in levels:
+        if done and all(lv is not d for d in done):
+            nearest = min(done, key=lambda d: abs(d.twist - lv.twist))
+            lv.guess = 0.5 * sum(nearest.bracket())
 
 
 def triple_gap(levels: list[Level]) -> tuple[Level, Level] | None:
@@ -315,6 +414,104 @@ def triple_gap(levels: list[Level]) -> tuple[Level, Level] | None:
     below = max(without, key=lambda v: v.twist)
     above = [lv for lv in with_ if lv.twist > below.twist]
     return (below, min(above, key=lambda v: v.twist)) if above else None
+
+
+# ---------------------------------------------------------------- hysteresis (dynamic)
+# The paper's runs only twist up. Turned back, a buckled rod stays buckled below the onset
+# until its last loop pops out: between that twist and the onset, straight and buckled
+# states coexist. One run per load finds it: twisted past the onset (HYSTERESIS_OVER of
+# it: the straight rod is unstable there, and the hold's stability probe buckles it), then
+# turned back in steps of hysteresis_step of the onset twist, held to a stable equilibrium
+# at each (the scene's own hold), down to HYSTERESIS_FLOOR of it.
+HYSTERESIS_OVER = 1.05
+HYSTERESIS_FLOOR = 0.3
+
+
+def hysteresis_extensions(sweep, settings: Settings) -> np.ndarray:
+    """The loads of the return runs: `hysteresis_loads` extensions, each in the middle of an
+    equal slice of the box's extension axis."""
+    lo, hi = sweep.axes["extension"]
+    k = np.arange(settings.hysteresis_loads)
+    return lo + (hi - lo) * (k + 0.5) / settings.hysteresis_loads
+
+
+def return_twists(critical: float, settings: Settings) -> list[float]:
+    """Φa of the holds of one return run: past the onset `critical`, then down from it in
+    steps of hysteresis_step·critical to HYSTERESIS_FLOOR·critical."""
+    count = int(round((1 - HYSTERESIS_FLOOR) / settings.hysteresis_step))
+    return [HYSTERESIS_OVER * critical] + [critical * (1 - k * settings.hysteresis_step)
+                                           for k in range(1, count + 1)]
+
+
+def hysteresis_jobs(sweep, scene, onset: pd.DataFrame, settings: Settings) -> list:
+    """One continuation Job per load (sweep.Job with twist targets up, then down): each hold
+    is a stored run, id `return-ext…-phi…` (its point), params twist_density, extension,
+    `load` (the load's index) and `step` (the hold's place on the return, 0 = past the
+    onset)."""
+    from .sweep import Job, _registered_builder, scene_for
+    from .units import turns_for_twist_density
+
+    builder = _registered_builder(scene.scene)
+    ok = onset["twist_density"].notna()
+    jobs = []
+    for index, extension in enumerate(hysteresis_extensions(sweep, settings)):
+        critical = float(np.interp(extension, onset["extension"][ok], onset["twist_density"][ok]))
+        twists = return_twists(critical, settings)
+        cfg = scene_for(scene, {"twist_density": twists[0], "extension": float(extension)})
+        targets = [turns_for_twist_density(t, cfg.rod.radius, cfg.rod.length) for t in twists]
+        ids = [f"return-ext{extension:.6f}-phi{t:.6f}" for t in twists]
+        params = [{"twist_density": t, "extension": float(extension), "load": float(index),
+                   "step": float(k)} for k, t in enumerate(twists)]
+        jobs.append(Job(ids, params, cfg, twist_targets=targets, builder=builder))
+    return jobs
+
+
+def restraighten_rows(runs: pd.DataFrame, onset: pd.DataFrame) -> list[dict]:
+    """One `restraighten` row per load of a classified table's return runs: the twist at which
+    the buckled rod came back straight is bracketed by the lowest hold that stayed buckled
+    and the next one down, which was straight. A load whose rod did not buckle past the onset,
+    or stayed buckled down to the floor, or whose holds failed, says so in its note. A hold
+    counts as buckled when it is labelled so or writhes by more than paths.JUMP_WRITHE."""
+    if "load" not in runs:
+        return []
+    from .paths import JUMP_WRITHE
+
+    rows = []
+    for _, group in runs[runs["load"].notna()].groupby("load"):
+        group = group.sort_values("step")
+        extension = float(group["extension"].iloc[0])
+        # a shape the classifier reads as straight but that writhes is buckled: the tightest
+        # solenoids (above L/L0 ~ 1.165 for the paper's rod) have turns shorter than its
+        # partner separation
+        writhe = (group["writhe"] if "writhe" in group else pd.Series(np.nan, group.index))
+        coiled = np.abs(writhe.to_numpy(float)) > JUMP_WRITHE
+        phases = ["solenoid" if p == "straight" and c else p
+                  for p, c in zip(group["phase"], coiled)]
+        twists = group["twist_density"].to_numpy(float)
+        row = {"kind": "restraighten", "extension": extension, "extension_low": extension,
+               "extension_high": extension, "twist_density": np.nan,
+               "twist_density_low": np.nan, "twist_density_high": np.nan,
+               "failed": sum(p not in BUCKLED + ("straight",) for p in phases), "note": ""}
+        if phases[0] not in BUCKLED:
+            row["note"] = (f"the rod did not buckle at Phi*a {twists[0]:.4g}, past the onset "
+                           f"({phases[0]})")
+        else:
+            down = list(zip(twists[1:], phases[1:]))
+            straight = next((k for k, (_, p) in enumerate(down) if p == "straight"), None)
+            before = down[:straight] if straight is not None else down
+            if any(p not in BUCKLED for _, p in before):
+                row["note"] = "a hold of the return failed before the rod came back straight"
+            elif straight is None:
+                row["twist_density_high"] = down[-1][0] if down else twists[0]
+                row["twist_density_low"] = 0.0
+                row["note"] = f"still buckled at the lowest hold (Phi*a {row['twist_density_high']:.4g})"
+            else:
+                high = down[straight - 1][0] if straight else twists[0]
+                low = down[straight][0]
+                row.update(twist_density=0.5 * (low + high), twist_density_low=low,
+                           twist_density_high=high)
+        rows.append(row)
+    return rows
 
 
 # ---------------------------------------------------------------- the lines from the runs
@@ -334,9 +531,11 @@ def levels_from_store(table: pd.DataFrame, onset: pd.DataFrame, sweep,
     return [levels[k] for k in sorted(levels)]
 
 
-def lines(onset: pd.DataFrame, levels: list[Level], settings: Settings) -> pd.DataFrame:
+def lines(onset: pd.DataFrame, levels: list[Level], settings: Settings,
+          returns: list[dict] = ()) -> pd.DataFrame:
     """The boundaries table: the onset rows, one plectoneme_solenoid row per level with a
-    bracket, and the triple point's row (when the trace found both sides of it)."""
+    bracket, the triple point's row (when the trace found both sides of it) and the
+    `returns` (restraighten_rows)."""
     rows = [onset]
     traced = [r for lv in sorted(levels, key=lambda v: v.twist) if (r := lv.row()) is not None]
     if traced:
@@ -355,12 +554,35 @@ def lines(onset: pd.DataFrame, levels: list[Level], settings: Settings) -> pd.Da
             "twist_density_low": below.twist, "twist_density_high": above.twist,
             "note": ("between the highest twist whose plectoneme meets the straight rod and "
                      "the lowest with a plectoneme-solenoid boundary")}]))
+    if returns:
+        rows.append(pd.DataFrame(list(returns)))
     table = pd.concat(rows, ignore_index=True)
     for name in COLUMNS:
         if name not in table:
             table[name] = np.nan if name not in ("note", "kind") else ""
     table["note"] = table["note"].fillna("")
     return table[list(COLUMNS)]
+
+
+def predict_phase(table: pd.DataFrame, twist, extension) -> np.ndarray:
+    """The labels the lines of a boundaries table predict at points (Φa, L/L0) (arrays of
+    one shape): straight below the onset; above it, a solenoid from the plectoneme–solenoid
+    boundary's extension at that twist on (the line between its points, its end points held
+    beyond them) and a plectoneme below it, and below the triple point's twist (or with no
+    boundary traced) a plectoneme everywhere."""
+    twist, extension = np.broadcast_arrays(np.asarray(twist, float), np.asarray(extension, float))
+    onset = table[(table["kind"] == "onset") & table["twist_density"].notna()]
+    critical = np.interp(extension, onset["extension"], onset["twist_density"])
+    ps = table[table["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
+    out = np.where(twist < critical, "straight", "plectoneme").astype(object)
+    if len(ps):
+        boundary = np.interp(twist, ps["twist_density"], ps["extension"])
+        triple = table[table["kind"] == "triple_point"]
+        lowest = (float(triple["twist_density"].iloc[0]) if len(triple)
+                  else float(ps["twist_density"].iloc[0]))
+        solenoid = (twist >= critical) & (twist >= lowest) & (extension >= boundary)
+        out[solenoid] = "solenoid"
+    return out
 
 
 def claims(table: pd.DataFrame, above: float = 1.1) -> dict:
@@ -404,6 +626,7 @@ class Trace:
     claims: dict
     report: object | None
     onset_seconds: float
+    hysteresis_report: object | None = None  # the return runs' (--hysteresis), timed apart
 
 
 def sweep_for_boundaries(sweep_file, overrides=(), settings: dict | None = None):
@@ -419,12 +642,15 @@ def sweep_for_boundaries(sweep_file, overrides=(), settings: dict | None = None)
     return sweep, scene
 
 
-def trace(sweep, scene, output: str | None, *, only_onset: bool = False, jobs: int = 1,
-          backend: str = "loky", scheduler: str | None = None, progress: bool = False,
-          echo=print, replace: bool = False) -> Trace:
+def trace(sweep, scene, output: str | None, *, only_onset: bool = False,
+          hysteresis: bool = False, jobs: int = 1, backend: str = "loky",
+          scheduler: str | None = None, progress: bool = False, echo=print,
+          replace: bool = False) -> Trace:
     """The boundaries of the box of `sweep` for its scene: the onset line (static, always),
     and unless `only_onset` the plectoneme–solenoid boundary and the triple point, traced by
-    runs into the store at `output` (resumed like any sweep) where the table is kept too."""
+    runs into the store at `output` (resumed like any sweep) where the table is kept too.
+    With `hysteresis`, then the return runs (hysteresis_jobs) into the same store, timed
+    apart; a store's return runs give `restraighten` rows whenever the lines are made."""
     import time
 
     from .sweep import run_sweep
@@ -434,6 +660,7 @@ def trace(sweep, scene, output: str | None, *, only_onset: bool = False, jobs: i
     onset = onset_line(scene, sweep, settings)
     onset_seconds = time.process_time() - cpu
     check_box(onset, sweep)
+    check_settings(onset, settings)
     if only_onset:
         table = lines(onset, [], settings)
         return Trace(table, claims(table), None, onset_seconds)
@@ -443,6 +670,14 @@ def trace(sweep, scene, output: str | None, *, only_onset: bool = False, jobs: i
                                                                onset, workers=jobs))
     if report.stopped_by:
         return Trace(lines(onset, [], settings), {}, report, onset_seconds)
+    returns = None
+    if hysteresis:
+        returns = run_sweep(sweep, scene, output, jobs=jobs, backend=backend,
+                            scheduler=scheduler, progress=progress, echo=echo,
+                            rounds_of=lambda store: iter([hysteresis_jobs(sweep, scene, onset,
+                                                                          settings)]))
+        if returns.stopped_by:
+            return Trace(lines(onset, [], settings), {}, report, onset_seconds, returns)
     from ._version import __version__
     from .store import open_store
     from .tabulate import classify_table
@@ -451,13 +686,10 @@ def trace(sweep, scene, output: str | None, *, only_onset: bool = False, jobs: i
                     config_hash=config.config_hash(sweep, scene), version=__version__,
                     kind="sweep") as store:
         runs = store.table(classify_table(store))  # params, status and labels
-        table = lines(onset, levels_from_store(runs, onset, sweep, settings), settings)
-        store.write_boundaries(table, column_units(),
-                               {"tolerance": settings.tolerance,
-                                "twist_tolerance": settings.twist_tolerance,
-                                "levels": settings.levels, "onset_points": settings.onset_points,
-                                "onset_tolerance": settings.onset_tolerance})
-    return Trace(table, claims(table), report, onset_seconds)
+        table = lines(onset, levels_from_store(runs, onset, sweep, settings), settings,
+                      restraighten_rows(runs, onset))
+        store.write_boundaries(table, column_units(), dataclasses.asdict(settings))
+    return Trace(table, claims(table), report, onset_seconds, returns)
 
 
 def summary(trace_: Trace) -> str:
@@ -478,12 +710,20 @@ def summary(trace_: Trace) -> str:
                        f"{r.extension_high:.4f}]  {r.note}")
     elif trace_.report is not None:
         out.append("plectoneme-solenoid boundary: none in the box (no twist level has a "
-                   "plectoneme at its lowest extension and a solenoid at its highest)")
+                   "plectoneme under a solenoid below the onset)")
     tp = t[t["kind"] == "triple_point"]
     for r in tp.itertuples():
         out.append(f"triple point: L/L0 {r.extension:.3f} [{r.extension_low:.3f}, "
                    f"{r.extension_high:.3f}], Phi*a {r.twist_density:.3f} "
                    f"[{r.twist_density_low:.3f}, {r.twist_density_high:.3f}]")
+    back = t[t["kind"] == "restraighten"]
+    if len(back):
+        out.append("restraighten (turned back from past the onset):  L/L0  Phi*a [bracket]"
+                   "   onset   note")
+        critical = np.interp(back["extension"], onset["extension"], onset["twist_density"])
+        for r, c in zip(back.itertuples(), critical):
+            out.append(f"  {r.extension:6.3f}  {r.twist_density:6.3f} [{r.twist_density_low:.3f}, "
+                       f"{r.twist_density_high:.3f}]   {c:.3f}   {r.note}")
     c = trace_.claims
     if "onset_slope" in c:
         out.append(f"onset at high extension: Phi*a_c = ({c['onset_slope']:.3f} ± "

@@ -396,18 +396,22 @@ def _stored_summary(output, listed: set[str]) -> tuple[str, list[tuple[str, str,
               help="onset: only the straight rod's onset line, from the model's static "
               "stability (seconds, no runs, nothing stored).")
 @click.option("--tolerance", type=float, default=None,
-              help="Width in L/L0 of a plectoneme-solenoid bracket [default 0.005].")
+              help="Width in L/L0 of a plectoneme-solenoid bracket [default 0.01: ±0.005].")
 @click.option("--twist-tolerance", type=float, default=None,
-              help="Width in Phi*a of the triple point's bracket [default 0.05].")
+              help="Width in Phi*a of the triple point's bracket [default 0.1: ±0.05].")
 @click.option("--levels", type=int, default=None,
               help="Twist levels of the first round, spread over the box [default 6].")
+@click.option("--hysteresis", is_flag=True,
+              help="Also turn the end back: at loads along the onset, one run each twists "
+              "past the onset, then back in holds, and gives the twist at which the rod comes "
+              "back straight (rows 'restraighten'; timed apart).")
 @_where_runs_go
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 @reports_errors
-def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, levels, jobs,
-               backend, scheduler, sets, quiet, force):
+def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, levels,
+               hysteresis, jobs, backend, scheduler, sets, quiet, force):
     """Trace the phase diagram's lines: the straight rod's onset, the plectoneme-solenoid
     boundary and the triple point, each with its bracket.
 
@@ -424,17 +428,21 @@ def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, l
     """
     from .boundaries import summary, sweep_for_boundaries, trace
 
+    if hysteresis and only == "onset":
+        raise click.UsageError("--hysteresis takes runs; --only onset makes none")
     settings = {"tolerance": tolerance, "twist_tolerance": twist_tolerance, "levels": levels}
     sweep_cfg, scene_cfg = sweep_for_boundaries(sweep_file, _overrides(sets), settings)
-    found = trace(sweep_cfg, scene_cfg, output, only_onset=only == "onset", jobs=jobs,
+    found = trace(sweep_cfg, scene_cfg, output, only_onset=only == "onset",
+                  hysteresis=hysteresis, jobs=jobs,
                   backend=backend, scheduler=scheduler, echo=click.echo, replace=force,
                   progress=not quiet and sys.stderr.isatty())
-    if found.report is not None and found.report.stopped_by:
-        import signal
+    for report in (found.report, found.hysteresis_report):
+        if report is not None and report.stopped_by:
+            import signal
 
-        click.echo(f"stopped by {found.report.stopped_by}: the runs finished so far are "
-                   f"stored in {output}; run the same command to go on.", err=True)
-        sys.exit(128 + signal.Signals[found.report.stopped_by].value)
+            click.echo(f"stopped by {report.stopped_by}: the runs finished so far are "
+                       f"stored in {output}; run the same command to go on.", err=True)
+            sys.exit(128 + signal.Signals[report.stopped_by].value)
     click.echo(summary(found))
     if found.report is None:
         click.echo(f"onset line in {found.onset_seconds:.2f} CPU s (no runs)")
@@ -442,6 +450,10 @@ def boundaries(sweep_file, output, csv_path, only, tolerance, twist_tolerance, l
         r = found.report
         click.echo(f"{r.done} runs ok, {r.failed} failed, {r.skipped} reused of {r.total} in "
                    f"{r.wall:.1f} s; runs and boundaries in {output}")
+        if found.hysteresis_report is not None:
+            h = found.hysteresis_report
+            click.echo(f"hysteresis: {h.done} holds ok, {h.failed} failed, {h.skipped} reused "
+                       f"of {h.total} in {h.wall:.1f} s (timed apart)")
     if csv_path:
         make_output_folder(csv_path)
         found.table.to_csv(csv_path, index=False, float_format="%.10g")

@@ -428,6 +428,10 @@ BOUNDARY_SCHEMA: dict[str, Check] = {
                         "plectoneme-solenoid bracket"),
     "twist_tolerance": number(1e-3, 1.0, unit="Phi*a, the width of the triple point's bracket"),
     "levels": number(2, 40, integer=True, unit="twist levels of the first round"),
+    "hysteresis_loads": number(1, 40, integer=True, unit="loads of the return runs "
+                               "(--hysteresis)"),
+    "hysteresis_step": number(0.005, 0.2, unit="step down in twist between the return's "
+                              "holds, a fraction of the onset"),
 }
 
 
@@ -1198,6 +1202,8 @@ MEANINGS: dict[str, str] = {
     "sweep.seed": "seed of the sampler (the same seed gives the same points and results)",
     "sweep.columns": "paths sampler: loads (columns of the map); null = √samples",
     "sweep.boundary": "boundaries sampler: tolerance (L/L0 width of a plectoneme-solenoid "
-                      "bracket, 0.005), twist_tolerance (Phi*a width of the triple point's, "
-                      "0.05), levels (twist levels of the first round, 6)",
+                      "bracket, 0.01), twist_tolerance (Phi*a width of the triple point's, "
+                      "0.1), levels (twist levels of the first round, 6), hysteresis_loads "
+                      "(loads of the return runs, 6) and hysteresis_step (their step down in "
+                      "twist, 0.025 of the onset)",
 }

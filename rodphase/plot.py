@@ -147,7 +147,7 @@ def sweep_caption(config: dict, table: pd.DataFrame | None = None) -> str:
     if sweep and sweep.get("sampler") == "boundaries":
         bracket = sweep.get("boundary") or {}
         parts.append(f"runs placed by bracketing (rodphase boundaries, tolerance "
-                     f"{bracket.get('tolerance', 0.005):g} in L/L0)")
+                     f"{bracket.get('tolerance', 0.01):g} in L/L0)")
     elif sweep:
         parts.append(f"{sweep.get('samples', '?')} {sweep.get('sampler', '?')} samples, "
                      f"seed {sweep.get('seed', '?')}")
@@ -311,8 +311,9 @@ def legend_columns(labels: list[str], width: float, fontsize: float) -> int:
 
 def boundary_lines(ax, lines: pd.DataFrame) -> list:
     """Draw a boundaries table's plectoneme–solenoid boundary (the brackets' middles joined,
-    the brackets as a band) and its triple point (error bars: its brackets) on `ax`; return
-    the legend handles."""
+    the brackets as a band), the twist at which a rod turned back comes straight again
+    (--hysteresis; dashed, the band up to the onset shaded: both states coexist there) and
+    the triple point (error bars: its brackets) on `ax`; return the legend handles."""
     handles = []
     ps = lines[lines["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
     # a bracket that failed runs left wide (the model fails there) is no point of the line
@@ -331,6 +332,20 @@ def boundary_lines(ax, lines: pd.DataFrame) -> list:
                          color=VERMILLION, alpha=0.25, lw=0, zorder=1)
         handles += ax.plot(ps["extension"], ps["twist_density"], "-", color=VERMILLION, lw=1.4,
                            marker="|", ms=6, zorder=4, label="plectoneme–solenoid, traced")
+    back = lines[lines["kind"] == "restraighten"].dropna(subset=["twist_density"])
+    back = back.sort_values("extension")
+    if len(back):
+        onset = lines[(lines["kind"] == "onset") & lines["twist_density"].notna()]
+        critical = np.interp(back["extension"], onset["extension"], onset["twist_density"])
+        handles.append(ax.fill_between(back["extension"], back["twist_density"], critical,
+                                       color="0.5", alpha=0.15, lw=0, zorder=1,
+                                       label="straight and buckled coexist"))
+        handles.append(ax.errorbar(
+            back["extension"], back["twist_density"],
+            yerr=[back["twist_density"] - back["twist_density_low"],
+                  back["twist_density_high"] - back["twist_density"]],
+            fmt="--", color="0.25", lw=1.2, capsize=2, zorder=4,
+            label="turned back: straight again"))
     tp = lines[lines["kind"] == "triple_point"]
     for row in tp.itertuples():
         handles.append(ax.errorbar(

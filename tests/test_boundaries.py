@@ -82,6 +82,110 @@ def test_a_level_without_a_boundary_and_the_triple_point_between_levels():
     assert B.triple_gap([above]) is None
 
 
+def test_a_level_starts_in_its_middle_and_searches_only_as_far_as_it_must():
+    # no guess: the middle first; the top (the last extension to buckle) only without a
+    # solenoid, the box's lowest extension (the slowest runs) only if the halving reaches it
+    lv = level({})
+    assert lv.first_probes(0.01) == [pytest.approx(1.15)]
+    lv.probes[1.15] = "plectoneme"
+    assert lv.next_probe(0.01) == 1.3 and lv.has_boundary() is None
+    lv.probes[1.3] = "plectoneme"
+    assert lv.has_boundary() is False and lv.next_probe(0.01) is None
+    lv = level({1.15: "solenoid"})
+    assert lv.has_boundary() is True and lv.next_probe(0.01) == pytest.approx(1.075)
+    lv = level({1.008: "solenoid"})
+    assert lv.next_probe(0.01) == 1.0  # within half a tolerance of the lowest: that one
+    assert level({1.0: "solenoid"}).next_probe(0.01) is None  # below the box: nothing to find
+    # a top that failed (the model's corner) is stepped under, towards the highest plectoneme
+    lv = level({1.15: "plectoneme", 1.3: "failed"})
+    assert lv.next_probe(0.01) == pytest.approx(1.225) and lv.has_boundary() is None
+
+
+def test_a_neighbours_boundary_is_tried_first_and_steps_widen_from_it():
+    lv = level({}, twist=1.6)
+    lv.guess = 1.137
+    assert lv.first_probes(0.01) == pytest.approx([1.127, 1.147])
+    lv.probes.update({1.127: "solenoid", 1.147: "solenoid"})
+    assert lv.next_probe(0.01) == pytest.approx(1.127 - 0.04)  # twice as far each time
+    # inside a wide bracket the guess is tried half a tolerance either side
+    wide = level({1.0: "plectoneme", 1.3: "solenoid"}, twist=1.6)
+    wide.guess = 1.137
+    assert wide.next_probes(0.01, 2) == pytest.approx([1.132, 1.142])
+    # guide hands the nearest finished level's boundary to the open ones
+    done = level({1.135: "plectoneme", 1.14: "solenoid"}, twist=2.0)
+    far = level({1.2: "plectoneme", 1.28: "solenoid"}, twist=2.4)
+    open_ = level({1.0: "plectoneme", 1.3: "solenoid"}, twist=1.7)
+    B.guide([far, done, open_], 0.01)
+    assert open_.guess == pytest.approx(1.1375) and done.guess is None
+
+
+def lines_table():
+    onset = pd.DataFrame({"kind": "onset", "extension": [1.0, 1.1, 1.2, 1.3],
+                          "twist_density": [0.2, 1.0, 1.5, 2.0]})
+    ps = pd.DataFrame({"kind": "plectoneme_solenoid", "extension": [1.13, 1.14],
+                       "twist_density": [1.4, 2.4]})
+    tp = pd.DataFrame({"kind": ["triple_point"], "extension": [1.14], "twist_density": [1.2]})
+    return pd.concat([onset, ps, tp], ignore_index=True)
+
+
+def test_the_lines_predict_the_label_of_any_point():
+    table = lines_table()
+    twist = np.array([0.5, 0.9, 1.1, 2.0, 2.0, 1.2, 2.4])
+    extension = np.array([1.2, 1.05, 1.05, 1.12, 1.16, 1.15, 1.139])
+    assert list(B.predict_phase(table, twist, extension)) == [
+        "straight",    # below the onset
+        "plectoneme",  # above the onset, below the triple point's twist
+        "plectoneme",
+        "plectoneme",  # under the boundary (1.135 at 2.0)
+        "solenoid",    # over it
+        "straight",    # 1.2 < the onset at 1.15 (1.25)
+        "plectoneme"]  # just under the boundary's end point, held beyond it
+    only_onset = table[table["kind"] == "onset"]
+    assert list(B.predict_phase(only_onset, [0.1, 2.0], [1.05, 1.2])) == ["straight", "plectoneme"]
+
+
+def returns(phases, twists, extension=1.1, load=0):
+    return pd.DataFrame({"load": float(load), "step": np.arange(len(phases), dtype=float),
+                         "extension": extension, "twist_density": twists, "phase": phases})
+
+
+def test_the_twist_of_restraightening_is_bracketed_by_the_return_holds():
+    twists = [1.05, 0.975, 0.95, 0.925, 0.9]
+    table = pd.concat([
+        returns(["plectoneme", "plectoneme", "solenoid", "straight", "straight"], twists),
+        returns(["plectoneme", "mixed", "plectoneme", "solenoid", "solenoid"], twists, load=1),
+        returns(["straight", "straight", "straight", "straight", "straight"], twists, load=2),
+        returns(["plectoneme", "failed", "straight", "straight", "straight"], twists, load=3)])
+    rows = {int(k): r for k, r in enumerate(B.restraighten_rows(table, None))}
+    assert (rows[0]["twist_density_low"], rows[0]["twist_density_high"]) == (0.925, 0.95)
+    assert rows[0]["twist_density"] == pytest.approx(0.9375) and rows[0]["note"] == ""
+    assert rows[1]["twist_density_high"] == 0.9 and "still buckled" in rows[1]["note"]
+    assert np.isnan(rows[2]["twist_density"]) and "did not buckle" in rows[2]["note"]
+    assert np.isnan(rows[3]["twist_density"]) and "failed" in rows[3]["note"]
+    assert all(r["kind"] == "restraighten" for r in rows.values())
+    assert B.restraighten_rows(table.drop(columns="load"), None) == []
+    # a tight coil the classifier reads as straight still writhes: buckled
+    coil = returns(["straight", "straight", "straight"], [1.05, 0.9, 0.8])
+    coil["writhe"] = [2.5, 1.2, 0.0005]
+    (row,) = B.restraighten_rows(coil, None)
+    assert (row["twist_density_low"], row["twist_density_high"]) == (0.8, 0.9)
+
+
+def test_the_return_runs_twist_past_the_onset_then_back_in_holds():
+    settings = B.Settings(hysteresis_loads=2, hysteresis_step=0.1)
+    assert B.return_twists(1.0, settings) == pytest.approx(
+        [1.05, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3])
+    sweep, scene = B.sweep_for_boundaries("fig3_paper", [("rod.element_length", 1.0)])
+    onset = pd.DataFrame({"kind": "onset", "extension": [1.0, 1.3],
+                          "twist_density": [0.2, 2.0]})
+    jobs = B.hysteresis_jobs(sweep, scene, onset, settings)
+    assert [job.params[0]["extension"] for job in jobs] == pytest.approx([1.075, 1.225])
+    first = jobs[0]
+    assert first.twist_targets[0] > first.twist_targets[1] > first.twist_targets[-1] > 0
+    assert len(set(first.run_ids)) == len(first.run_ids) == 8
+    assert all(p["load"] == 0 and p["step"] == k for k, p in enumerate(first.params))
+
+
 # ---------------------------------------------------------------- the onset line, static
 
 @pytest.mark.slow  # long: 31 s of CPU (62 s wall at load 4 on 2 cores)
@@ -148,6 +252,14 @@ def test_sweep_refuses_the_boundaries_sampler_and_bad_settings_are_named(tmp_pat
     result = CliRunner().invoke(main, ["boundaries", str(path), "-o", str(tmp_path / "x.h5"),
                                        "--tolerance", "0"])
     assert result.exit_code == 2 and "sweep.boundary.tolerance" in result.output
+    # finer than the onset's band (where a label depends on the push): refused before a run
+    result = CliRunner().invoke(main, ["boundaries", str(path), "-o", str(tmp_path / "x.h5"),
+                                       "--tolerance", "2e-4"])
+    assert result.exit_code == 2 and "onset's band" in result.output, result.output
+    assert not (tmp_path / "x.h5").exists()
+    result = CliRunner().invoke(main, ["boundaries", str(path), "-o", str(tmp_path / "x.h5"),
+                                       "--only", "onset", "--hysteresis"])
+    assert result.exit_code == 2 and "--hysteresis" in result.output
 
 
 # ---------------------------------------------------------------- a whole trace, small
@@ -164,22 +276,54 @@ def test_a_small_trace_finds_a_boundary_stores_its_runs_and_resumes(tmp_path):
                 "loading.twist_rate": 1.0, "solver.hold_max_time": 8},
         "axes": {"twist_density": [0.0, 2.2], "extension": [1.03, 1.25]}}}))
     sweep, scene = B.sweep_for_boundaries(path, [], {"tolerance": 0.04, "levels": 2,
-                                                     "twist_tolerance": 0.5})
+                                                     "twist_tolerance": 0.5,
+                                                     "hysteresis_loads": 1,
+                                                     "hysteresis_step": 0.1})
     out = str(tmp_path / "lines.h5")
-    first = B.trace(sweep, scene, out, jobs=2, echo=lambda text: None)
+    first = B.trace(sweep, scene, out, jobs=2, echo=lambda text: None, hysteresis=True)
     kinds = set(first.table["kind"])
-    assert "onset" in kinds
+    assert {"onset", "restraighten"} <= kinds
+    # turned back, the rod comes straight below its onset (straight and buckled coexist
+    # between): the bracket is one return step wide
+    (back,) = first.table[first.table["kind"] == "restraighten"].itertuples()
+    onset = first.table[first.table["kind"] == "onset"]
+    critical = np.interp(back.extension, onset["extension"], onset["twist_density"])
+    assert back.twist_density_low < back.twist_density < back.twist_density_high < critical
+    assert back.twist_density_high - back.twist_density_low == pytest.approx(0.1 * critical)
     with rodphase.open(out) as store:
         stored = store.boundaries()
         runs = store.table()
     assert stored is not None and len(stored) == len(first.table)
     assert {"level", "step", "twist_density", "extension"} <= set(runs.columns)
-    assert first.report.done + first.report.failed == len(runs) > 0
-    again = B.trace(sweep, scene, out, jobs=2, echo=lambda text: None)
-    assert again.report.skipped == again.report.total == len(runs)
+    returns = first.hysteresis_report
+    assert (first.report.done + first.report.failed + returns.done + returns.failed
+            == len(runs) > 0)
+    again = B.trace(sweep, scene, out, jobs=2, echo=lambda text: None, hysteresis=True)
+    assert again.report.skipped == again.report.total
+    assert again.hysteresis_report.skipped == again.hysteresis_report.total
+    assert again.report.total + again.hysteresis_report.total == len(runs)
     pd.testing.assert_frame_equal(again.table, first.table)
     ps = first.table[first.table["kind"] == "plectoneme_solenoid"]
     assert np.all(ps["extension_high"] - ps["extension_low"] <= 0.04 + 1e-12)
+
+
+@pytest.mark.slow  # long: ~35 s on 2 cores
+def test_another_filaments_boundaries_follow_from_its_rod_alone(tmp_path):
+    # a thicker rod with a softer shear (a = 0.02 m, G = 0.5 MPa, L/L0 up to 1.25): nothing
+    # set but the rod; its resolution (auto: 100 elements), onset, bracketing and classifier
+    # follow from the scene. Its lines are its own: the onset rises faster than the paper
+    # rod's (the softer shear lowers the twist stiffness less than the bending's share), and
+    # a plectoneme-solenoid boundary and a triple point are found in its box
+    sweep, scene = B.sweep_for_boundaries(
+        "fig3_paper", [("rod.radius", 0.02), ("material.shear_modulus", 5e5),
+                       ("sweep.axes.extension", [1.0, 1.25])],
+        {"tolerance": 0.02, "levels": 4, "twist_tolerance": 0.3})
+    assert scene.rod.elements == 100
+    found = B.trace(sweep, scene, str(tmp_path / "other.h5"), jobs=2, echo=lambda text: None)
+    ps = found.table[found.table["kind"] == "plectoneme_solenoid"]
+    assert len(ps) >= 1 and np.all(ps["extension_high"] - ps["extension_low"] <= 0.02 + 1e-12)
+    assert (found.table["kind"] == "triple_point").sum() == 1
+    assert found.claims["onset_slope"] > 5.5  # the paper's rod: 5.16
 
 
 def test_another_filaments_onset_line_follows_its_own_rod():
