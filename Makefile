@@ -150,12 +150,12 @@ fig3: $(STAMP)  ## the paper's Fig 3: rest Phi*a = theta*a0/L0 against L/L0, wit
 	$(BIN)/rodphase plot $(OUT)/fig3_paper.h5 --kind phase -o $(OUT)/fig3_paper.png
 	$(BIN)/python studies/critical_twist.py $(OUT)/fig3_paper.csv --above 1.1
 
-lines: $(STAMP)  ## Fig 3 as lines: the onset, the plectoneme-solenoid boundary and the triple point, with brackets
+lines: $(STAMP)  ## Fig 3 as lines: the onset, the plectoneme-solenoid boundary, the triple point and where a rod turned back comes straight, with brackets
 	@mkdir -p $(OUT)
-	$(BIN)/rodphase boundaries fig3_paper -o $(OUT)/fig3_lines.h5 --csv $(OUT)/fig3_lines.csv --jobs $(JOBS) --quiet
+	$(BIN)/rodphase boundaries fig3_paper -o $(OUT)/fig3_lines.h5 --csv $(OUT)/fig3_lines.csv --jobs $(JOBS) --quiet --hysteresis
 	$(BIN)/rodphase plot $(OUT)/fig3_lines.h5 --kind phase -o $(OUT)/fig3_lines.png
 
-figures: $(STAMP) fig3  ## every figure of the paper (docs/explanation/validation.md)
+figures: $(STAMP) fig3 lines  ## every figure of the paper (docs/explanation/validation.md), and Fig 3 as lines
 	$(BIN)/python studies/figures.py --out $(OUT) --jobs $(JOBS)
 
 # the figures docs/ shows: Fig 3's map (with its rows of docs/current.md) and the scene figures

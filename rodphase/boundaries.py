@@ -568,12 +568,14 @@ def predict_phase(table: pd.DataFrame, twist, extension) -> np.ndarray:
     """The labels the lines of a boundaries table predict at points (Φa, L/L0) (arrays of
     one shape): straight below the onset; above it, a solenoid from the plectoneme–solenoid
     boundary's extension at that twist on (the line between its points, its end points held
-    beyond them) and a plectoneme below it, and below the triple point's twist (or with no
+    beyond them; a bracket failed runs left wide is not one of them) and a plectoneme below it, and below the triple point's twist (or with no
     boundary traced) a plectoneme everywhere."""
     twist, extension = np.broadcast_arrays(np.asarray(twist, float), np.asarray(extension, float))
     onset = table[(table["kind"] == "onset") & table["twist_density"].notna()]
     critical = np.interp(extension, onset["extension"], onset["twist_density"])
     ps = table[table["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
+    # a bracket that failed runs left wide (the model fails there) is no point of the line
+    ps = ps[ps["failed"].fillna(0) < MAX_FAILED] if "failed" in ps else ps
     out = np.where(twist < critical, "straight", "plectoneme").astype(object)
     if len(ps):
         boundary = np.interp(twist, ps["twist_density"], ps["extension"])

@@ -366,6 +366,11 @@ def sweep(sweep_file, output, jobs, backend, scheduler, reconnect_timeout, retry
                    "status says the hold ran out of time)")
     if failures and report.skipped and not retry_failed:
         click.echo("  (failed runs are kept and skipped; --retry-failed runs them again)")
+    if set(sweep_cfg.axes) == {"twist_density", "extension"} and not quiet:
+        # the dots answer "what happened here"; the diagram's lines are another command's
+        # (for Fig 3 in a quarter of the map's time: docs/explanation/performance.md)
+        click.echo(f"the lines of this box (onset, plectoneme-solenoid boundary, triple point, "
+                   f"each with its bracket): rodphase boundaries {sweep_file} -o LINES.h5")
     sys.exit(0 if not failures else 1)
 
 

@@ -264,21 +264,27 @@ def test_sweep_refuses_the_boundaries_sampler_and_bad_settings_are_named(tmp_pat
 
 # ---------------------------------------------------------------- a whole trace, small
 
-@pytest.mark.slow
-def test_a_small_trace_finds_a_boundary_stores_its_runs_and_resumes(tmp_path):
-    # the demo's protocol at 40 elements, two levels and a coarse bracket: every run it
-    # places is an ordinary stored run, the table is kept in the store, and the same call
-    # again launches nothing and gives the same lines
+SMALL = {"tolerance": 0.04, "levels": 2, "twist_tolerance": 0.5, "hysteresis_loads": 1,
+         "hysteresis_step": 0.1}
+
+
+def small_box(tmp_path):
+    # the demo's protocol at 40 elements, two levels and a coarse bracket
     path = tmp_path / "lines.yaml"
     path.write_text(yaml.safe_dump({"sweep": {
         "scene": "twist_under_load",
         "set": {"rod.element_length": 1.0, "loading.quasi_static_below": 0.8,
                 "loading.twist_rate": 1.0, "solver.hold_max_time": 8},
-        "axes": {"twist_density": [0.0, 2.2], "extension": [1.03, 1.25]}}}))
-    sweep, scene = B.sweep_for_boundaries(path, [], {"tolerance": 0.04, "levels": 2,
-                                                     "twist_tolerance": 0.5,
-                                                     "hysteresis_loads": 1,
-                                                     "hysteresis_step": 0.1})
+        "axes": {"twist_density": [0.0, 2.2], "extension": [1.03, 1.25]},
+        "boundary": SMALL}}))
+    return path
+
+
+@pytest.mark.slow
+def test_a_small_trace_finds_a_boundary_stores_its_runs_and_resumes(tmp_path):
+    # every run it places is an ordinary stored run, the table is kept in the store, and
+    # the same call again launches nothing and gives the same lines
+    sweep, scene = B.sweep_for_boundaries(small_box(tmp_path), [])
     out = str(tmp_path / "lines.h5")
     first = B.trace(sweep, scene, out, jobs=2, echo=lambda text: None, hysteresis=True)
     kinds = set(first.table["kind"])
@@ -305,6 +311,26 @@ def test_a_small_trace_finds_a_boundary_stores_its_runs_and_resumes(tmp_path):
     pd.testing.assert_frame_equal(again.table, first.table)
     ps = first.table[first.table["kind"] == "plectoneme_solenoid"]
     assert np.all(ps["extension_high"] - ps["extension_low"] <= 0.04 + 1e-12)
+
+
+@pytest.mark.slow  # long: two small traces and a kill (~25 s on 2 cores)
+def test_a_trace_killed_with_sigkill_resumes_to_the_same_lines(tmp_path):
+    from killing import kill_after_runs  # tests/killing.py
+
+    box = small_box(tmp_path)
+    whole = B.trace(*B.sweep_for_boundaries(box, []), str(tmp_path / "whole.h5"), jobs=2,
+                    echo=lambda text: None)
+    killed = tmp_path / "killed.h5"
+    # killed once the first round is in the file, workers and all
+    finished = kill_after_runs(["boundaries", box, "-o", killed, "--jobs", 2, "--quiet"],
+                               killed, 2)
+    if len(finished) == whole.report.total:
+        pytest.skip("the trace finished before it could be killed")
+    again = B.trace(*B.sweep_for_boundaries(box, []), str(killed), jobs=2,
+                    echo=lambda text: None)
+    assert again.report.skipped >= len(finished) > 0  # every finished run reused
+    assert again.report.total == whole.report.total
+    pd.testing.assert_frame_equal(again.table, whole.table)
 
 
 @pytest.mark.slow  # long: ~35 s on 2 cores

@@ -10,10 +10,8 @@ Bit for bit, because nothing in a run is random but what the config seeds."""
 import hashlib
 import math
 import os
-import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -25,7 +23,7 @@ from rodphase import config as C
 from rodphase.cli import main
 from rodphase.rod.onset import straight_onset_turns
 from rodphase.scenes import rod_from
-from rodphase.store import read_store, read_table
+from rodphase.store import read_store
 
 NEAR = {"rod.elements": 40, "loading.quasi_static_below": 0.8, "loading.force_multiple": None,
         "loading.extension": 1.2, "loading.twist_rate": 1.0, "output.topology": False}
@@ -94,23 +92,9 @@ def test_a_near_onset_sweep_is_the_same_on_one_or_two_jobs_and_killed_and_resume
     assert len(reference) == 4
     assert stored_positions(two) == reference
     # killed with SIGKILL once a run is in the file, then the same command again
-    command = [sys.executable, "-m", "rodphase.cli", "sweep", str(sweep), "-o", str(killed),
-               "--jobs", "1", "--quiet"]
-    proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL,
-                            env=dict(os.environ, HDF5_USE_FILE_LOCKING="FALSE"))
-    deadline, finished = time.time() + 300, set()
-    try:
-        while time.time() < deadline and proc.poll() is None:
-            time.sleep(0.05)
-            if killed.exists():
-                finished = set(read_table(killed)["run_id"])
-                if finished:
-                    break
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    from killing import kill_after_runs  # tests/killing.py
+
+    finished = kill_after_runs(["sweep", sweep, "-o", killed, "--jobs", 1, "--quiet"], killed, 1)
     if len(finished) == 4:
         pytest.skip("the sweep finished before it could be killed")
     result = cli("sweep", sweep, "-o", killed, "--quiet")

@@ -1,10 +1,5 @@
 """The sweep tool end to end: sampling, parallel runs, resume after a kill, Dask, classify, plot."""
 
-import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import h5py
@@ -17,7 +12,7 @@ from click.testing import CliRunner
 from rodphase import config as C
 from rodphase.cli import main
 from rodphase.scenes import SCENES
-from rodphase.store import read_store, read_table
+from rodphase.store import read_store
 from rodphase.sweep import plan, run_scene, sample_points
 
 # coarse and short: 12 elements, a fast twist and brief holds; still a real run with contact
@@ -137,26 +132,10 @@ def test_killed_sweep_resumes_and_keeps_finished_runs_identical(tmp_path):
     path = sweep_file(tmp_path, samples=6,
                       extra={"solver.hold_max_time": 20.0, "solver.hold_until": "time"})
     out = tmp_path / "out.h5"
-    command = [sys.executable, "-m", "rodphase.cli", "sweep", str(path), "-o", str(out),
-               "--jobs", "1", "--quiet"]
-    env = dict(os.environ, HDF5_USE_FILE_LOCKING="FALSE")
-    proc = subprocess.Popen(command, env=env, start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 300
-    finished = set()
-    try:
-        while time.time() < deadline and proc.poll() is None:
-            time.sleep(0.2)
-            if not out.exists():
-                continue
-            # a reader may follow a running sweep: the file is never written in place
-            finished = set(read_table(out)["run_id"])
-            if len(finished) >= 2:
-                break
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    from killing import kill_after_runs  # tests/killing.py
+
+    finished = kill_after_runs(["sweep", path, "-o", out, "--jobs", 1, "--quiet"], out, 2,
+                               poll=0.2)
     if len(finished) >= 6:
         pytest.skip("the sweep finished before it could be killed")
     assert len(finished) >= 2

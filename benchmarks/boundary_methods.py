@@ -1,0 +1,360 @@
+#!/usr/bin/env python
+r"""The boundaries of Fig 3 against its maps of dots (issue #45): wall time, work and precision.
+
+    python benchmarks/boundary_methods.py timing [--pairs 2]     # rodphase boundaries vs sweep
+    python benchmarks/boundary_methods.py reference              # fine runs near the lines
+    python benchmarks/boundary_methods.py compare [--write]      # work-precision, interleaved
+    python benchmarks/boundary_methods.py errors [--write]       # compare's errors again, no runs
+
+`timing` runs `rodphase boundaries fig3_paper` and `rodphase sweep fig3_paper` (today's
+200-point map), both `--jobs 2`, each into a fresh store, alternating (B S S B ...), and
+prints the wall times and their ratio with the machine and its load before and after. The
+numba cache is warm (a first untimed `rodphase run`).
+
+`reference` places runs near the lines a default trace found (timing's first store, or a new
+trace): on both sides of the plectoneme–solenoid boundary at six twists from the triple
+point to 2.4 (± 0.003, 0.008, 0.02 in L/L0), on both sides of the onset at seven extensions
+(± 3 % in Φa) and a 3 × 3 patch around the triple point (± 0.01 L/L0, ± 0.05 Φa); it
+runs them with the paper's protocol step by step from rest (loading.quasi_static_below = 0),
+n = 140 (auto resolution off), safety 0.25 and half the twist rate: finer, slower and free of
+every shortcut the methods take. Placed by one method's lines, so it favours no sampler of
+dots, and it asks every method the question the lines answer.
+
+`compare` runs, interleaved in one process: random and Sobol maps of 50, 100 and 200 points
+(fig3_paper with sampler random/sobol), the adaptive sampler's 120 and 200
+(fig3_paper_adaptive) and the boundaries at tolerance 0.02, 0.01 (default) and 0.005; each
+into a fresh store, CPU time (user + system of the command and its workers, the compile
+excluded by a warm cache). The error of each is the share of the reference's runs (mixed,
+failed and unconverged ones left out and counted) whose label it gets wrong: a map of dots
+answers with its nearest run's label (studytools.boundary_error), the boundaries with the
+label their lines predict (boundaries.predict_phase). Writes out/perf/boundary_methods.json,
+docs/img/work_precision_maps.png and, with --write, the block boundary_methods of
+docs/explanation/performance.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rodphase.studytools import boundary_error, machine, sweep_table, write_block
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "out" / "perf"
+RODPHASE = str(Path(sys.executable).with_name("rodphase"))
+AXES = ("twist_density", "extension")
+BOX = (np.array([0.0, 1.0]), np.array([2.6, 0.3]))  # Fig 3's box: lo, span of (Φa, L/L0)
+REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static_below=0",
+                 "loading.twist_rate=0.25", "solver.refinements=1"]
+# name: (command, config, --set items)
+METHODS = {
+    **{f"random {n}": ("sweep", "configs/fig3_paper.yaml", ["sweep.sampler=random",
+                                                             f"sweep.samples={n}"])
+       for n in (50, 100, 200)},
+    **{f"sobol {n}": ("sweep", "configs/fig3_paper.yaml", [f"sweep.samples={n}"])
+       for n in (50, 100, 200)},
+    **{f"adaptive {n}": ("sweep", "configs/fig3_paper_adaptive.yaml", [f"sweep.samples={n}"])
+       for n in (120, 200)},
+    **{f"boundaries {t}": ("boundaries", "configs/fig3_paper.yaml", ["--tolerance", str(t)])
+       for t in (0.02, 0.01, 0.005)},
+    # the reference's resolution (n = 140) with everything else the map's: how much of the
+    # error is the resolution's
+    "boundaries 0.01, n = 140": ("boundaries", "configs/fig3_paper.yaml",
+                                 ["--set", f"rod.element_length={1 / (140 * 0.025)!r}"]),
+}
+
+
+def children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def timed(command: str, config: str, store: Path, extra: list[str], jobs: int = 2):
+    """(wall [s], CPU [s]) of one rodphase command into a fresh store."""
+    store.unlink(missing_ok=True)
+    args = [RODPHASE, command, config, "-o", str(store), "--jobs", str(jobs), "--quiet"]
+    if command == "sweep":
+        for item in extra:
+            args += ["--set", item]
+    else:
+        args += extra
+    cpu0, t0 = children_cpu(), time.perf_counter()
+    done = subprocess.run(args, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - t0, children_cpu() - cpu0
+    if done.returncode not in (0, 1):
+        raise SystemExit(f"{' '.join(args)} exited {done.returncode}:\n{done.stderr}")
+    return wall, cpu
+
+
+def warm() -> None:
+    """numba's cache filled before anything is timed: the compile is measured apart
+    (benchmarks/compile_time.py)."""
+    (OUT / "warm.h5").unlink(missing_ok=True)
+    subprocess.run([RODPHASE, "sweep", "quick", "-o", str(OUT / "warm.h5"), "--jobs", "2",
+                    "--quiet"], check=True, capture_output=True)
+
+
+def load_text(m: dict) -> str:
+    return " ".join(f"{x:.2f}" for x in m["load"])
+
+
+def timing(pairs: int, record: bool = False) -> None:
+    warm()
+    before = machine()
+    rows = []
+    for k in range(pairs):
+        order = ("boundaries", "sweep") if k % 2 == 0 else ("sweep", "boundaries")
+        for command in order:
+            wall, cpu = timed(command, "fig3_paper", OUT / f"timing_{command}_{k}.h5", [])
+            rows.append({"command": command, "pair": k, "wall": wall, "cpu": cpu})
+            print(rows[-1], flush=True)
+    after = machine()
+    frame = pd.DataFrame(rows)
+    mean = frame.groupby("command")[["wall", "cpu"]].mean()
+    ratio = mean.loc["boundaries", "wall"] / mean.loc["sweep", "wall"]
+    info = {"rows": rows, "machine_before": before, "machine_after": after,
+            "wall_ratio": ratio,
+            "cpu_ratio": mean.loc["boundaries", "cpu"] / mean.loc["sweep", "cpu"]}
+    (OUT / "boundary_timing.json").write_text(json.dumps(info, indent=1))
+    print(f"on {before['cpu']}, {before['nproc']} cores, load {load_text(before)} before, "
+          f"{load_text(after)} after")
+    print(frame.to_string(index=False))
+    text = (f"{mean.loc['boundaries', 'wall']:.1f} s wall against "
+            f"{mean.loc['sweep', 'wall']:.1f} s for the 200-point map (`rodphase sweep "
+            f"fig3_paper`), ratio {ratio:.3f}; CPU ratio {info['cpu_ratio']:.3f} "
+            f"({pairs} pairs interleaved, both --jobs 2, numba cache warm)")
+    print(text)
+    if record:
+        from rodphase.studytools import record_current
+
+        record_current("fig3_lines_time", text,
+                       source="`python benchmarks/boundary_methods.py timing --record`",
+                       machine=f"{before['cpu']}, {before['nproc']} cores, load "
+                               f"{load_text(before)} before, {load_text(after)} after")
+
+
+# ---------------------------------------------------------------- the fine reference
+
+def traced_lines() -> pd.DataFrame:
+    """The lines of a default trace: the first `timing` store, or a new trace."""
+    from rodphase.api import open as open_store
+
+    store = OUT / "timing_boundaries_0.h5"
+    if not store.exists():
+        timed("boundaries", "fig3_paper", store, [])
+    with open_store(store) as s:
+        return s.boundaries()
+
+
+def reference_points(lines: pd.DataFrame) -> list[dict]:
+    from rodphase.boundaries import onset_extension
+
+    onset = lines[lines["kind"] == "onset"]
+    ps = lines[lines["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
+    triple = lines[lines["kind"] == "triple_point"].iloc[0]
+    points = []
+    for twist in np.linspace(triple["twist_density_high"], 2.4, 6):
+        boundary = float(np.interp(twist, ps["twist_density"], ps["extension"]))
+        ceiling = onset_extension(onset, twist) - 0.003  # stay buckled
+        for d in (-0.02, -0.008, -0.003, 0.003, 0.008, 0.02):
+            if boundary + d < ceiling:
+                points.append({"twist_density": float(twist), "extension": boundary + d,
+                               "near": "plectoneme_solenoid"})
+    for extension in np.linspace(1.03, 1.27, 7):
+        critical = float(np.interp(extension, onset["extension"], onset["twist_density"]))
+        for f in (-0.03, 0.03):
+            points.append({"twist_density": critical * (1 + f), "extension": float(extension),
+                           "near": "onset"})
+    for dt in (-0.05, 0.0, 0.05):
+        for de in (-0.01, 0.0, 0.01):
+            points.append({"twist_density": float(triple["twist_density"]) + dt,
+                           "extension": float(triple["extension"]) + de,
+                           "near": "triple_point"})
+    return points
+
+
+def reference(jobs: int) -> None:
+    from rodphase import config
+    from rodphase.scenes import SCENES
+    from rodphase.sweep import Job, run_sweep, scene_for
+
+    points = reference_points(traced_lines())
+    sweep, scene = config.load_sweep("configs/fig3_paper.yaml", [
+        tuple(item.split("=", 1)) for item in REFERENCE_SET], SCENES)
+    jobs_ = [Job([f"ref{k:03d}"], [{"twist_density": p["twist_density"],
+                                   "extension": p["extension"]}],
+                 scene_for(scene, {"twist_density": p["twist_density"],
+                                   "extension": p["extension"]}))
+             for k, p in enumerate(points)]
+    store = OUT / "boundary_reference.h5"
+    before, cpu0, t0 = machine(), time.process_time(), time.perf_counter()
+    run_sweep(sweep, scene, str(store), jobs=jobs, progress=False,
+              rounds_of=lambda _store: iter([jobs_]))
+    wall = time.perf_counter() - t0
+    subprocess.run([RODPHASE, "classify", str(store)], check=True, capture_output=True)
+    table = sweep_table(store)
+    table["near"] = [p["near"] for p in points]
+    table.to_csv(OUT / "boundary_reference.csv", index=False)
+    info = {"points": len(points), "wall": wall, "sets": REFERENCE_SET,
+            "phases": table["phase"].value_counts().to_dict(), "machine": before,
+            "parent_cpu": time.process_time() - cpu0}
+    (OUT / "boundary_reference.json").write_text(json.dumps(info, indent=1))
+    print(json.dumps(info, indent=1))
+
+
+# ---------------------------------------------------------------- work against precision
+
+def usable_reference() -> tuple[pd.DataFrame, dict]:
+    ref = pd.read_csv(OUT / "boundary_reference.csv")
+    left_out = ref[~ref["phase"].isin(["straight", "plectoneme", "solenoid"])]
+    return (ref[ref["phase"].isin(["straight", "plectoneme", "solenoid"])],
+            left_out["phase"].value_counts().to_dict())
+
+
+def error_of(command: str, store: Path, ref: pd.DataFrame) -> tuple[float, dict]:
+    """(share of reference labels wrong, the store's runs and failed runs); classifies the
+    store first (untimed)."""
+    subprocess.run([RODPHASE, "classify", str(store)], check=True, capture_output=True)
+    if command == "boundaries":
+        from rodphase.api import open as open_store
+        from rodphase.boundaries import predict_phase
+
+        with open_store(store) as s:
+            lines = s.boundaries()
+        guessed = predict_phase(lines, ref["twist_density"].to_numpy(), ref["extension"].to_numpy())
+        wrong = guessed != ref["phase"].to_numpy()
+        table = sweep_table(store)
+    else:
+        table = sweep_table(store)
+        wrong = None
+    runs = {"runs": len(table), "failed": int((table["phase"] == "failed").sum())}
+    if wrong is None:
+        return boundary_error(ref, table, AXES, *BOX), runs
+    return float(np.mean(wrong)), runs
+
+
+def compare(rounds: int, write: bool, methods: list[str]) -> None:
+    ref, left_out = usable_reference()
+    warm()
+    before = machine()
+    rows = []
+    for r in range(rounds):
+        for name in (methods if r % 2 == 0 else methods[::-1]):
+            command, config, extra = METHODS[name]
+            store = OUT / f"wp_{name.replace(' ', '_')}_{r}.h5"
+            wall, cpu = timed(command, config, store, extra)
+            error, runs = error_of(command, store, ref)
+            rows.append({"method": name, "round": r, "wall": wall, "cpu": cpu,
+                         "error": error, **runs})
+            print(rows[-1], flush=True)
+    after = machine()
+    report(rows, before, after, write)
+
+
+def errors(write: bool) -> None:
+    """The errors of the last compare's stores again (after a change in how lines predict
+    labels), with the times it measured: no run is made."""
+    data = json.loads((OUT / "boundary_methods.json").read_text())
+    ref, _ = usable_reference()
+    for row in data["rows"]:
+        command = METHODS[row["method"]][0]
+        store = OUT / f"wp_{row['method'].replace(' ', '_')}_{row['round']}.h5"
+        row["error"], _ = error_of(command, store, ref)
+    report(data["rows"], data["machine_before"], data["machine_after"], write)
+
+
+def report(rows: list[dict], before: dict, after: dict, write: bool) -> None:
+    ref, left_out = usable_reference()
+    rounds = max(row["round"] for row in rows) + 1
+    (OUT / "boundary_methods.json").write_text(json.dumps(
+        {"rows": rows, "machine_before": before, "machine_after": after,
+         "reference": len(ref), "reference_left_out": left_out}, indent=1))
+    frame = pd.DataFrame(rows)
+    chart(frame)
+    mean = frame.groupby("method", sort=False)[["runs", "failed", "wall", "cpu", "error"]].mean()
+    lines = [f"Measured on {before['cpu']}, {before['nproc']} cores, load {load_text(before)} "
+             f"before and {load_text(after)} after, {rounds} round(s) interleaved; reference: "
+             f"{len(ref)} runs near the lines ({left_out or 'none'} left out).", "",
+             "| method | runs | failed | wall [s] | CPU [s] | wrong labels near the lines |",
+             "|---|---|---|---|---|---|"]
+    for name, m in mean.iterrows():
+        lines.append(f"| {name} | {m['runs']:.0f} | {m['failed']:.0f} | {m['wall']:.1f} | "
+                     f"{m['cpu']:.1f} | {m['error']:.3f} |")
+    text = "\n".join(lines)
+    print(text)
+    if write:
+        write_block(ROOT / "docs" / "explanation" / "performance.md", "boundary_methods", text)
+
+
+def chart(frame: pd.DataFrame) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    mean = frame.groupby("method", sort=False)[["cpu", "error"]].mean()
+    families = {}
+    for name, m in mean.iterrows():
+        # "sobol 200" -> family sobol, point "200"; "boundaries 0.01, n = 140" its own family
+        family, point = name.split(" ", 1)
+        if "," in point:
+            point, extra = point.split(",", 1)
+            family += "," + extra
+        families.setdefault(family, []).append((m["cpu"], m["error"], point))
+    for family, items in families.items():
+        items.sort()
+        ax.plot([i[0] for i in items], [max(i[1], 1e-3) for i in items], "o-", label=family)
+        for cpu, error, point in items:
+            ax.annotate(point, (cpu, max(error, 1e-3)), fontsize=7, xytext=(3, 3),
+                        textcoords="offset points")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("CPU time [s] (2 workers, warm cache)")
+    ax.set_ylabel("share of reference labels wrong")
+    ax.set_title("Fig 3: work against precision near the boundaries")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "img" / "work_precision_maps.png", dpi=120)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("step", choices=["timing", "reference", "compare", "errors"])
+    parser.add_argument("--pairs", type=int, default=2, help="timing: pairs")
+    parser.add_argument("--rounds", type=int, default=1, help="compare: rounds")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--methods", default=";".join(METHODS),
+                        help=f"compare: methods separated by ';' (known: {'; '.join(METHODS)})")
+    parser.add_argument("--write", action="store_true",
+                        help="compare: update docs/explanation/performance.md")
+    parser.add_argument("--record", action="store_true",
+                        help="timing: make it the current figure (docs/current.json)")
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    os.chdir(ROOT)
+    if args.step == "timing":
+        timing(args.pairs, args.record)
+    elif args.step == "reference":
+        reference(args.jobs)
+    elif args.step == "errors":
+        errors(args.write)
+    else:
+        methods = [m.strip() for m in args.methods.split(";") if m.strip()]
+        unknown = [m for m in methods if m not in METHODS]
+        if unknown:
+            parser.error(f"--methods: unknown {unknown} (known: {list(METHODS)})")
+        compare(args.rounds, args.write, methods)
+
+
+if __name__ == "__main__":
+    main()
