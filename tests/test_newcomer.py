@@ -120,22 +120,9 @@ def test_a_stopped_run_leaves_a_store_it_did_not_make_as_it_was(tmp_path, monkey
 
 
 def _stored_run(status="ok", n=8, rows=4):
-    from rodphase.result import HISTORY_COLUMNS, RunResult
+    from fakes import fake_run  # tests/fakes.py
 
-    history = {name: np.zeros(rows) for name in HISTORY_COLUMNS}
-    history["time"] = np.linspace(0.0, 1.0, rows)
-    positions = np.zeros((n + 1, 3))
-    positions[:, 2] = np.linspace(0.0, 1.0, n + 1)
-    return RunResult(
-        status=status, message="completed" if status == "ok" else "unstable at t = 1 s",
-        positions=positions, directors=np.tile(np.eye(3), (n, 1, 1)), radii=np.full(n, 0.025),
-        rest_lengths=np.full(n, 1.0 / n), history=history,
-        snapshot_positions=positions[None].copy(), snapshot_d1=np.tile([1.0, 0, 0], (1, n, 1)),
-        snapshot_rows=np.array([rows - 1]),
-        diagnostics={"steps": 10, "wall_time": 0.1, "rest_radius": 0.025, "rest_length": 1.0,
-                     "youngs_modulus": 1e6, "elements": n, "notes": [],
-                     "stages": [{"label": "hold 0"}]},
-        stage_ends=[rows - 1])
+    return fake_run(status, n=n, rows=rows)
 
 
 # ---------------------------------------------------------------- progress without a terminal
