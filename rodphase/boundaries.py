@@ -564,6 +564,15 @@ def lines(onset: pd.DataFrame, levels: list[Level], settings: Settings,
     return table[list(COLUMNS)]
 
 
+def left_wide(rows: pd.DataFrame) -> pd.Series:
+    """Which rows of a boundaries table are brackets that failed runs left wide (MAX_FAILED
+    of them on the level: the model fails there, as in Fig 3's corner): no point of the line,
+    for the claims, the predicted labels and the plot alike."""
+    if "failed" not in rows:
+        return pd.Series(False, index=rows.index)
+    return (rows["kind"] == "plectoneme_solenoid") & (rows["failed"].fillna(0) >= MAX_FAILED)
+
+
 def predict_phase(table: pd.DataFrame, twist, extension) -> np.ndarray:
     """The labels the lines of a boundaries table predict at points (Φa, L/L0) (arrays of
     one shape): straight below the onset; above it, a solenoid from the plectoneme–solenoid
@@ -574,8 +583,7 @@ def predict_phase(table: pd.DataFrame, twist, extension) -> np.ndarray:
     onset = table[(table["kind"] == "onset") & table["twist_density"].notna()]
     critical = np.interp(extension, onset["extension"], onset["twist_density"])
     ps = table[table["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
-    # a bracket that failed runs left wide (the model fails there) is no point of the line
-    ps = ps[ps["failed"].fillna(0) < MAX_FAILED] if "failed" in ps else ps
+    ps = ps[~left_wide(ps)]
     out = np.where(twist < critical, "straight", "plectoneme").astype(object)
     if len(ps):
         boundary = np.interp(twist, ps["twist_density"], ps["extension"])
@@ -601,9 +609,7 @@ def claims(table: pd.DataFrame, above: float = 1.1) -> dict:
         out["onset_slope"], out["onset_intercept"] = float(slope), float(intercept)
         out["onset_slope_error"], out["onset_intercept_error"] = map(float, np.sqrt(np.diag(cov)))
     ps = table[table["kind"] == "plectoneme_solenoid"]
-    # a bracket left wide by failed runs (the model fails there) says nothing of where
-    # solenoids begin
-    ps = ps[ps["failed"].fillna(0) < MAX_FAILED]
+    ps = ps[~left_wide(ps)]  # says nothing of where solenoids begin
     if len(ps):
         first = ps.loc[ps["extension"].idxmin()]
         out["solenoids_from"] = float(first["extension"])

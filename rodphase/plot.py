@@ -30,7 +30,7 @@ from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from . import units
-from .boundaries import MAX_FAILED
+from .boundaries import left_wide
 from .result import RunResult, rotation_put_in
 
 DPI = 200
@@ -316,9 +316,7 @@ def boundary_lines(ax, lines: pd.DataFrame) -> list:
     the triple point (error bars: its brackets) on `ax`; return the legend handles."""
     handles = []
     ps = lines[lines["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
-    # a bracket that failed runs left wide (the model fails there) is no point of the line
-    wide = (ps["failed"].fillna(0) >= MAX_FAILED if "failed" in ps
-            else pd.Series(False, ps.index))
+    wide = left_wide(ps)
     if wide.any():
         handles.append(ax.errorbar(
             ps.loc[wide, "extension"], ps.loc[wide, "twist_density"],
