@@ -3,6 +3,7 @@ r"""The boundaries of Fig 3 against its maps of dots (issue #45): wall time, wor
 
     python benchmarks/boundary_methods.py timing [--pairs 2]     # rodphase boundaries vs sweep
     python benchmarks/boundary_methods.py reference              # fine runs near the lines
+    python benchmarks/boundary_methods.py reference --reference half_rate
     python benchmarks/boundary_methods.py compare [--write]      # work-precision, interleaved
     python benchmarks/boundary_methods.py errors [--write]       # compare's errors again, no runs
 
@@ -11,12 +12,13 @@ r"""The boundaries of Fig 3 against its maps of dots (issue #45): wall time, wor
 prints the wall times and their ratio with the machine and its load before and after. The
 numba cache is warm (a first untimed `rodphase run`).
 
-`reference` places runs near the lines a default trace found (timing's first store, or a new
-trace): on both sides of the plectoneme–solenoid boundary at six twists from the triple
-point to 2.4 (± 0.003, 0.008, 0.02 in L/L0), on both sides of the onset at seven extensions
-(± 3 % in Φa) and a 3 × 3 patch around the triple point (± 0.01 L/L0, ± 0.05 Φa); it
-runs them with the paper's protocol step by step from rest (loading.quasi_static_below = 0),
-n = 140 (auto resolution off), safety 0.25 and half the twist rate: finer, slower and free of
+`reference [--reference paper_rate|half_rate]` places runs near the lines a default trace
+found (timing's first store, or a new trace): on both sides of the plectoneme–solenoid
+boundary at six twists from the triple point to 2.4 (± 0.003, 0.008, 0.02 in L/L0), on both
+sides of the onset at seven extensions (± 3 % in Φa) and a 3 × 3 patch around the triple
+point (± 0.01 L/L0, ± 0.05 Φa); it runs them with the paper's protocol step by step from rest
+(loading.quasi_static_below = 0), n = 140 (auto resolution off) and a quarter of the stable
+step, at the scene's twist rate (paper_rate) or at half of it (half_rate): finer and free of
 every shortcut the methods take. Placed by one method's lines, so it favours no sampler of
 dots, and it asks every method the question the lines answer.
 
@@ -24,8 +26,9 @@ dots, and it asks every method the question the lines answer.
 (fig3_paper with sampler random/sobol), the adaptive sampler's 120 and 200
 (fig3_paper_adaptive) and the boundaries at tolerance 0.02, 0.01 (default) and 0.005; each
 into a fresh store, CPU time (user + system of the command and its workers, the compile
-excluded by a warm cache). The error of each is the share of the reference's runs (mixed,
-failed and unconverged ones left out and counted) whose label it gets wrong: a map of dots
+excluded by a warm cache). The error of each, against every reference built, is the share
+of the reference's runs (mixed, failed and unconverged ones left out and counted) whose
+label it gets wrong: a map of dots
 answers with its nearest run's label (studytools.boundary_error), the boundaries with the
 label their lines predict (boundaries.predict_phase). Writes out/perf/boundary_methods.json,
 docs/img/work_precision_maps.png and, with --write, the block boundary_methods of
@@ -53,8 +56,12 @@ OUT = ROOT / "out" / "perf"
 RODPHASE = str(Path(sys.executable).with_name("rodphase"))
 AXES = ("twist_density", "extension")
 BOX = (np.array([0.0, 1.0]), np.array([2.6, 0.3]))  # Fig 3's box: lo, span of (Φa, L/L0)
-REFERENCE_SET = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static_below=0",
-                 "loading.twist_rate=0.25", "solver.refinements=1"]
+# the references: finer in space and time and free of the shortcuts (n = 140, a quarter of
+# the stable step, from rest), at the scene's own twist rate (the paper's 0.5 turns/s) or at
+# half of it (which moves the plectoneme-solenoid boundary: docs/explanation/performance.md)
+FINE = ["rod.elements=140", "solver.safety=0.25", "loading.quasi_static_below=0",
+        "solver.refinements=1"]
+REFERENCES = {"paper_rate": FINE, "half_rate": FINE + ["loading.twist_rate=0.25"]}
 # name: (command, config, --set items)
 METHODS = {
     **{f"random {n}": ("sweep", "configs/fig3_paper.yaml", ["sweep.sampler=random",
@@ -182,20 +189,20 @@ def reference_points(lines: pd.DataFrame) -> list[dict]:
     return points
 
 
-def reference(jobs: int) -> None:
+def reference(jobs: int, which: str) -> None:
     from rodphase import config
     from rodphase.scenes import SCENES
     from rodphase.sweep import Job, run_sweep, scene_for
 
     points = reference_points(traced_lines())
     sweep, scene = config.load_sweep("configs/fig3_paper.yaml", [
-        tuple(item.split("=", 1)) for item in REFERENCE_SET], SCENES)
+        tuple(item.split("=", 1)) for item in REFERENCES[which]], SCENES)
     jobs_ = [Job([f"ref{k:03d}"], [{"twist_density": p["twist_density"],
                                    "extension": p["extension"]}],
                  scene_for(scene, {"twist_density": p["twist_density"],
                                    "extension": p["extension"]}))
              for k, p in enumerate(points)]
-    store = OUT / "boundary_reference.h5"
+    store = OUT / f"boundary_reference_{which}.h5"
     before, cpu0, t0 = machine(), time.process_time(), time.perf_counter()
     run_sweep(sweep, scene, str(store), jobs=jobs, progress=False,
               rounds_of=lambda _store: iter([jobs_]))
@@ -203,47 +210,53 @@ def reference(jobs: int) -> None:
     subprocess.run([RODPHASE, "classify", str(store)], check=True, capture_output=True)
     table = sweep_table(store)
     table["near"] = [p["near"] for p in points]
-    table.to_csv(OUT / "boundary_reference.csv", index=False)
-    info = {"points": len(points), "wall": wall, "sets": REFERENCE_SET,
+    table.to_csv(OUT / f"boundary_reference_{which}.csv", index=False)
+    info = {"points": len(points), "wall": wall, "sets": REFERENCES[which],
             "phases": table["phase"].value_counts().to_dict(), "machine": before,
             "parent_cpu": time.process_time() - cpu0}
-    (OUT / "boundary_reference.json").write_text(json.dumps(info, indent=1))
+    (OUT / f"boundary_reference_{which}.json").write_text(json.dumps(info, indent=1))
     print(json.dumps(info, indent=1))
 
 
 # ---------------------------------------------------------------- work against precision
 
-def usable_reference() -> tuple[pd.DataFrame, dict]:
-    ref = pd.read_csv(OUT / "boundary_reference.csv")
+def usable_reference(which: str) -> tuple[pd.DataFrame, dict]:
+    """(the reference's runs with a clear label, the counts of the others by label)."""
+    ref = pd.read_csv(OUT / f"boundary_reference_{which}.csv")
     left_out = ref[~ref["phase"].isin(["straight", "plectoneme", "solenoid"])]
     return (ref[ref["phase"].isin(["straight", "plectoneme", "solenoid"])],
             left_out["phase"].value_counts().to_dict())
 
 
-def error_of(command: str, store: Path, ref: pd.DataFrame) -> tuple[float, dict]:
-    """(share of reference labels wrong, the store's runs and failed runs); classifies the
-    store first (untimed)."""
-    subprocess.run([RODPHASE, "classify", str(store)], check=True, capture_output=True)
-    if command == "boundaries":
-        from rodphase.api import open as open_store
-        from rodphase.boundaries import predict_phase
+def references() -> dict[str, tuple[pd.DataFrame, dict]]:
+    """Every reference built so far, the scene's own rate first (the chart's)."""
+    return {w: usable_reference(w) for w in REFERENCES
+            if (OUT / f"boundary_reference_{w}.csv").exists()}
 
-        with open_store(store) as s:
-            lines = s.boundaries()
-        guessed = predict_phase(lines, ref["twist_density"].to_numpy(), ref["extension"].to_numpy())
-        wrong = guessed != ref["phase"].to_numpy()
-        table = sweep_table(store)
-    else:
-        table = sweep_table(store)
-        wrong = None
-    runs = {"runs": len(table), "failed": int((table["phase"] == "failed").sum())}
-    if wrong is None:
-        return boundary_error(ref, table, AXES, *BOX), runs
-    return float(np.mean(wrong)), runs
+
+def error_of(command: str, store: Path, ref: pd.DataFrame) -> float:
+    """The share of `ref`'s labels the method's answer in `store` gets wrong (the store is
+    classified first, untimed): a map's nearest run's label, the lines' predicted label."""
+    if command != "boundaries":
+        return boundary_error(ref, sweep_table(store), AXES, *BOX)
+    from rodphase.api import open as open_store
+    from rodphase.boundaries import predict_phase
+
+    with open_store(store) as s:
+        lines = s.boundaries()
+    guessed = predict_phase(lines, ref["twist_density"].to_numpy(), ref["extension"].to_numpy())
+    return float(np.mean(guessed != ref["phase"].to_numpy()))
+
+
+def measured(command: str, store: Path) -> dict:
+    """The store's runs and failed runs, and its errors against every reference."""
+    subprocess.run([RODPHASE, "classify", str(store)], check=True, capture_output=True)
+    table = sweep_table(store)
+    return {"runs": len(table), "failed": int((table["phase"] == "failed").sum()),
+            "errors": {w: error_of(command, store, ref) for w, (ref, _) in references().items()}}
 
 
 def compare(rounds: int, write: bool, methods: list[str]) -> None:
-    ref, left_out = usable_reference()
     warm()
     before = machine()
     rows = []
@@ -252,57 +265,68 @@ def compare(rounds: int, write: bool, methods: list[str]) -> None:
             command, config, extra = METHODS[name]
             store = OUT / f"wp_{name.replace(' ', '_')}_{r}.h5"
             wall, cpu = timed(command, config, store, extra)
-            error, runs = error_of(command, store, ref)
             rows.append({"method": name, "round": r, "wall": wall, "cpu": cpu,
-                         "error": error, **runs})
+                         **measured(command, store)})
             print(rows[-1], flush=True)
     after = machine()
     report(rows, before, after, write)
 
 
 def errors(write: bool) -> None:
-    """The errors of the last compare's stores again (after a change in how lines predict
-    labels), with the times it measured: no run is made."""
+    """The errors of the last compare's stores again (against a new reference, or after a
+    change in how lines predict labels), with the times it measured: no run is made."""
     data = json.loads((OUT / "boundary_methods.json").read_text())
-    ref, _ = usable_reference()
     for row in data["rows"]:
         command = METHODS[row["method"]][0]
         store = OUT / f"wp_{row['method'].replace(' ', '_')}_{row['round']}.h5"
-        row["error"], _ = error_of(command, store, ref)
+        row.update(measured(command, store))
+        row.pop("error", None)
     report(data["rows"], data["machine_before"], data["machine_after"], write)
 
 
 def report(rows: list[dict], before: dict, after: dict, write: bool) -> None:
-    ref, left_out = usable_reference()
+    refs = references()
     rounds = max(row["round"] for row in rows) + 1
     (OUT / "boundary_methods.json").write_text(json.dumps(
         {"rows": rows, "machine_before": before, "machine_after": after,
-         "reference": len(ref), "reference_left_out": left_out}, indent=1))
+         "references": {w: {"runs": len(ref), "left_out": out}
+                        for w, (ref, out) in refs.items()}}, indent=1))
     frame = pd.DataFrame(rows)
-    chart(frame)
-    mean = frame.groupby("method", sort=False)[["runs", "failed", "wall", "cpu", "error"]].mean()
-    lines = [f"Measured on {before['cpu']}, {before['nproc']} cores, load {load_text(before)} "
-             f"before and {load_text(after)} after, {rounds} round(s) interleaved; reference: "
-             f"{len(ref)} runs near the lines ({left_out or 'none'} left out).", "",
-             "| method | runs | failed | wall [s] | CPU [s] | wrong labels near the lines |",
-             "|---|---|---|---|---|---|"]
+    for w in refs:
+        frame[w] = [row["errors"][w] for row in rows]
+    chart(frame, next(iter(refs)))
+    mean = frame.groupby("method", sort=False)[["runs", "failed", "wall", "cpu", *refs]].mean()
+    rates = {"paper_rate": "0.5 turns/s (the scene's)", "half_rate": "0.25 turns/s"}
+    from rodphase.studytools import git_commit
+
+    when = time.strftime("%Y-%m-%d", time.gmtime())
+    lines = [f"Measured {when} (errors) at {git_commit()} on {before['cpu']}, "
+             f"{before['nproc']} cores, load {load_text(before)} "
+             f"before and {load_text(after)} after, {rounds} round(s) interleaved. References: "
+             + "; ".join(f"twisted at {rates[w]}, {len(ref)} runs ({out or 'none'} left out)"
+                         for w, (ref, out) in refs.items()) + ".", "",
+             "| method | runs | failed | wall [s] | CPU [s] | "
+             + " | ".join(f"wrong near the lines, reference at {rates[w].split(' (')[0]}"
+                          for w in refs) + " |",
+             "|---|---|---|---|---|" + "---|" * len(refs)]
     for name, m in mean.iterrows():
         lines.append(f"| {name} | {m['runs']:.0f} | {m['failed']:.0f} | {m['wall']:.1f} | "
-                     f"{m['cpu']:.1f} | {m['error']:.3f} |")
+                     f"{m['cpu']:.1f} | " + " | ".join(f"{m[w]:.3f}" for w in refs) + " |")
     text = "\n".join(lines)
     print(text)
     if write:
         write_block(ROOT / "docs" / "explanation" / "performance.md", "boundary_methods", text)
 
 
-def chart(frame: pd.DataFrame) -> None:
+def chart(frame: pd.DataFrame, which: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    mean = frame.groupby("method", sort=False)[["cpu", "error"]].mean()
+    mean = frame.groupby("method", sort=False)[["cpu", which]].mean()
+    mean = mean.rename(columns={which: "error"})
     families = {}
     for name, m in mean.iterrows():
         # "sobol 200" -> family sobol, point "200"; "boundaries 0.01, n = 140" its own family
@@ -313,14 +337,15 @@ def chart(frame: pd.DataFrame) -> None:
         families.setdefault(family, []).append((m["cpu"], m["error"], point))
     for family, items in families.items():
         items.sort()
-        ax.plot([i[0] for i in items], [max(i[1], 1e-3) for i in items], "o-", label=family)
+        ax.plot([i[0] for i in items], [i[1] for i in items], "o-", label=family)
         for cpu, error, point in items:
-            ax.annotate(point, (cpu, max(error, 1e-3)), fontsize=7, xytext=(3, 3),
+            ax.annotate(point, (cpu, error), fontsize=7, xytext=(3, 3),
                         textcoords="offset points")
     ax.set_xscale("log")
-    ax.set_yscale("log")
+    ax.set_ylim(bottom=-0.01)  # an error of 0 is a point of the chart (linear axis)
     ax.set_xlabel("CPU time [s] (2 workers, warm cache)")
-    ax.set_ylabel("share of reference labels wrong")
+    rate = {"paper_rate": "0.5", "half_rate": "0.25"}[which]
+    ax.set_ylabel(f"share of reference labels wrong (reference at {rate} turns/s)")
     ax.set_title("Fig 3: work against precision near the boundaries")
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -333,6 +358,8 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=2, help="timing: pairs")
     parser.add_argument("--rounds", type=int, default=1, help="compare: rounds")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--reference", choices=list(REFERENCES), default="paper_rate",
+                        help="reference: which one to build")
     parser.add_argument("--methods", default=";".join(METHODS),
                         help=f"compare: methods separated by ';' (known: {'; '.join(METHODS)})")
     parser.add_argument("--write", action="store_true",
@@ -345,7 +372,7 @@ def main() -> None:
     if args.step == "timing":
         timing(args.pairs, args.record)
     elif args.step == "reference":
-        reference(args.jobs)
+        reference(args.jobs, args.reference)
     elif args.step == "errors":
         errors(args.write)
     else:
