@@ -246,10 +246,10 @@ def run_sweep(sweep, output, overrides=None, *, jobs: int | None = None, backend
 
 
 def trace_boundaries(sweep, output=None, overrides=None, *, only_onset: bool = False,
-               tolerance: float | None = None, twist_tolerance: float | None = None,
-               levels: int | None = None, jobs: int | None = None, backend: str = "loky",
-               scheduler: str | None = None, replace: bool = False,
-               progress: bool | None = None, **settings):
+               hysteresis: bool = False, tolerance: float | None = None,
+               twist_tolerance: float | None = None, levels: int | None = None,
+               jobs: int | None = None, backend: str = "loky", scheduler: str | None = None,
+               replace: bool = False, progress: bool | None = None, **settings):
     """The phase diagram's lines for a sweep's box: the straight rod's onset, the
     plectoneme–solenoid boundary and the triple point, each with its bracket (as
     ``rodphase boundaries``; see rodphase.boundaries).
@@ -263,16 +263,20 @@ def trace_boundaries(sweep, output=None, overrides=None, *, only_onset: bool = F
         with `only_onset`.
     only_onset : bool
         Only the onset line, from the model's static stability: no runs, nothing stored.
+    hysteresis : bool
+        Also the return runs: at loads along the onset, twisted past it and back in holds;
+        ``restraighten`` rows give where the rod comes straight again.
     tolerance, twist_tolerance, levels : optional
-        The width in L/L0 of a plectoneme–solenoid bracket (0.005), the width in Φa of the
-        triple point's (0.05), the twist levels of the first round (6).
+        The width in L/L0 of a plectoneme–solenoid bracket (0.01), the width in Φa of the
+        triple point's (0.1), the twist levels of the first round (6).
     jobs, backend, scheduler, replace, progress
         As for `run_sweep`.
 
     Returns
     -------
     pandas.DataFrame
-        One row per boundary point: ``kind`` (onset, plectoneme_solenoid, triple_point),
+        One row per boundary point: ``kind`` (onset, plectoneme_solenoid, triple_point,
+        restraighten),
         ``extension``, ``twist_density``, their brackets ``extension_low``/``_high`` and
         ``twist_density_low``/``_high``, and flags (rodphase.boundaries.COLUMNS);
         ``attrs["claims"]``: the onset's slope and intercept at high extension with their
@@ -284,16 +288,21 @@ def trace_boundaries(sweep, output=None, overrides=None, *, only_onset: bool = F
     sweep_cfg, scene_cfg = sweep_for_boundaries(sweep, _overrides(overrides, settings), chosen)
     if not only_onset and output is None:
         raise config.ConfigError("output", None, "a store path for the runs (or only_onset)")
+    if only_onset and hysteresis:
+        raise config.ConfigError("hysteresis", True, "False with only_onset (it makes runs; "
+                                 "only_onset makes none)")
     jobs = max(1, os.cpu_count() or 1) if jobs is None else int(jobs)
     progress = interactive() if progress is None else bool(progress)
     if output is not None:
         Path(output).parent.mkdir(parents=True, exist_ok=True)
     found = trace(sweep_cfg, scene_cfg, None if output is None else str(output),
-                  only_onset=only_onset, jobs=jobs, backend=backend, scheduler=scheduler,
+                  only_onset=only_onset, hysteresis=hysteresis, jobs=jobs,
+                  backend=backend, scheduler=scheduler,
                   progress=progress, echo=_say if progress else lambda _: None,
                   replace=replace)
-    if found.report is not None and found.report.stopped_by:
-        raise KeyboardInterrupt(f"stopped by {found.report.stopped_by}; call again to go on")
+    for report in (found.report, found.hysteresis_report):
+        if report is not None and report.stopped_by:
+            raise KeyboardInterrupt(f"stopped by {report.stopped_by}; call again to go on")
     found.table.attrs["claims"] = found.claims
     return found.table
 

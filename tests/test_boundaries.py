@@ -378,3 +378,5 @@ def test_the_same_from_python():
     assert claims["onset_slope"] > 0 and claims["onset_slope_error"] < 0.1 * claims["onset_slope"]
     with pytest.raises(rodphase.config.ConfigError, match="output"):
         rodphase.trace_boundaries("fig3_paper", progress=False)
+    with pytest.raises(rodphase.config.ConfigError, match="hysteresis"):
+        rodphase.trace_boundaries("fig3_paper", only_onset=True, hysteresis=True)
