@@ -195,10 +195,11 @@ class Level:
     def search(self, tolerance: float) -> float | None:
         """The next extension while there is no bracket yet, or None. With no solenoid, the
         level's top (the last extension to buckle): a plectoneme there means no boundary on
-        this level; a failed top is stepped under, half way to the highest buckled run. With solenoids and nothing buckled below the lowest, down from it: half
-        way to the box's lowest extension (no guess), or twice as far as the last step (from
-        a guess); the lowest extension itself once the step reaches it. MAX_FAILED failed
-        runs end the search."""
+        this level; a failed top is stepped under, half way to the highest buckled run.
+        With solenoids and nothing buckled below the lowest, down from it: half way to the
+        box's lowest extension (no guess), or twice as far as the last step (from a guess);
+        the lowest extension itself once the step reaches it. MAX_FAILED failed runs end the
+        search."""
         points = self.ordered()
         if sum(1 for _, p in points if p not in BUCKLED + ("straight",)) >= MAX_FAILED:
             return None
@@ -263,15 +264,15 @@ class Level:
                 return near
         if middle is None or count <= 1 or bracket is None:
             return [] if middle is None else [middle]
-        a, b = self.bracket()
+        a, b = bracket
         inside = [e for e, _ in self.ordered() if a <= e <= b]
         left = max(e for e in inside if e < middle)
         right = min(e for e in inside if e > middle)
         return [left + (right - left) * i / (count + 1) for i in range(1, count + 1)]
 
     def next_probe(self, tolerance: float) -> float | None:
-        """The next extension to run, or None once the bracket is narrower than tolerance:
-        a failed (or straight) probe inside the bracket splits it, and the widest gap with a
+        """The next extension to run, or None once the bracket is narrower than tolerance
+        (without a bracket yet: search). A failed (or straight) probe inside the bracket splits it, and the widest gap with a
         labelled shape at one end at least is narrowed next. A bracket that already holds
         MAX_FAILED failed runs is left as it is (the model fails there: Fig 3's corner, where
         the paper's law leaves its range) and says so in its row."""
