@@ -67,7 +67,7 @@ clean:  ## remove outputs (keeps .venv)
 ##@ Benchmarks (benchmarks/; the timings depend on the machine and its load: docs/explanation/performance.md)
 # `make bench` is the four that docs/history/benchmarks.md reports; each script also has its own target.
 .PHONY: bench bench-extra bench-kernel bench-topology bench-map bench-compile bench-overhead \
-	current-fig3 bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-map-tolerance \
+	current-fig3 bench-interleaved bench-laws bench-step-parts bench-work-precision bench-map-methods bench-lines bench-map-tolerance \
 	bit-identical base-tree
 BASE ?= main
 BASE_TREE = $(OUT)/base-rodphase
@@ -115,6 +115,12 @@ bench-step-parts: $(STAMP)  ## where a Fig 3 step goes; what a Newton iteration 
 
 bench-work-precision: $(STAMP)  ## error against CPU time over n and dt (docs/history/performance.md, ~7 min)
 	$(BIN)/python benchmarks/work_precision.py --write docs/history/performance.md
+
+bench-lines: $(STAMP)  ## Fig 3 as lines against the maps of dots: wall (interleaved), two fine references, work against precision (~45 min)
+	$(BIN)/python benchmarks/boundary_methods.py timing --pairs 3 --record
+	@test -f out/perf/boundary_reference_paper_rate.csv || $(BIN)/python benchmarks/boundary_methods.py reference
+	@test -f out/perf/boundary_reference_half_rate.csv || $(BIN)/python benchmarks/boundary_methods.py reference --reference half_rate
+	$(BIN)/python benchmarks/boundary_methods.py compare --write
 
 bench-map-methods: $(STAMP)  ## Fig 3 independent vs along paths: CPU, wall, boundary error against a fine reference (~35 min)
 	@test -f out/perf/map_reference.h5 || $(BIN)/python benchmarks/map_methods.py reference
