@@ -8,6 +8,7 @@ same command resumes.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import itertools
 import logging
 import math
@@ -181,8 +182,18 @@ def execute(job: Job) -> list[tuple[str, dict, RunResult | None, str]]:
     if job.twist_targets is None:
         return [(job.run_ids[0], job.params[0], keep_snapshots(result, policy), "")]
     incompressible = job.scene["material"]["incompressible"]
-    return [(rid, p, keep_snapshots(split_continuation(result, k, incompressible), policy), "")
+    return [(rid, p, keep_snapshots(_shared(split_continuation(result, k, incompressible),
+                                            len(job.run_ids)), policy), "")
             for k, (rid, p) in enumerate(zip(job.run_ids, job.params))]
+
+
+def _shared(sample: RunResult, share: int) -> RunResult:
+    """A continuation sample whose wall time is its share of the run's (as a path's samples'
+    are, paths._tagged), so that a store's wall times add up to the work done; the run's own
+    is kept as diagnostics["run_wall_time"]."""
+    wall = float(sample.diagnostics.get("wall_time", 0.0))
+    diagnostics = dict(sample.diagnostics, run_wall_time=wall, wall_time=wall / share)
+    return dataclasses.replace(sample, diagnostics=diagnostics)
 
 
 @dataclass

@@ -191,6 +191,12 @@ def test_continuation_shares_one_ramp_and_agrees_with_independent_runs(tmp_path)
     assert "in 3 continuation run(s)" in result.output
     pa, pb = final_positions(a), final_positions(b)
     assert pa.keys() == pb.keys() and len(pa) == 9
+    # the samples of one run share its wall time: the store's add up to the work done
+    with read_store(b) as store:
+        runs = [store.read_run(rid) for rid in store.run_ids()]
+    for run in runs:
+        d = run.diagnostics
+        assert d["wall_time"] == pytest.approx(d["run_wall_time"] / 3)
     for rid in pa:
         assert np.abs(pa[rid] - pb[rid]).max() < 1e-3
     cli("classify", b, "--csv", tmp_path / "c.csv")
