@@ -220,6 +220,11 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
                                           "ytick.labelsize": 7} if small else {})):
         fig, ax = _axes(ax, figsize)
         handles = []
+        # the holds of `rodphase boundaries --hysteresis`'s return runs (params `load`) are
+        # states reached by turning back: drawn small, so that the map's own runs stand out
+        returning = (table["load"].notna() if "load" in table
+                     else pd.Series(False, index=table.index)).to_numpy()
+        sizes = np.where(returning, 0.35, 1.0) * (24 if small else 42)
         names = list(PHASE_MARKERS) + sorted(set(phase[ok]) - set(PHASE_MARKERS))
         for name in names:
             rows = ok & (phase == name)
@@ -228,11 +233,14 @@ def phase_map(table: pd.DataFrame, path=None, *, experiments: pd.DataFrame | Non
             marker = PHASE_MARKERS.get(name, OTHER_MARKER)
             ax.scatter(table.loc[rows, "extension"], table.loc[rows, "twist_density"],
                        c=alignment[rows], cmap=ALIGNMENT_CMAP, norm=norm, marker=marker,
-                       s=24 if small else 42,
+                       s=sizes[rows.to_numpy()],
                        edgecolors="0.25", linewidths=0.5, plotnonfinite=True, zorder=2)
             face = "0.6" if name == "straight" else "0.9"  # straight is the grey of NaN
             handles.append(Line2D([], [], ls="", marker=marker, ms=7, mfc=face, mec="0.25",
                                   label=name if name != "?" else "unclassified"))
+        if returning.any():
+            handles.append(Line2D([], [], ls="", marker="o", ms=4, mfc="0.9", mec="0.25",
+                                  label="small: turned back"))
         if creeping.any():
             ax.scatter(table.loc[creeping, "extension"], table.loc[creeping, "twist_density"],
                        marker=".", s=6, c="black", zorder=3)

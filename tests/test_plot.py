@@ -63,6 +63,21 @@ def test_phase_map(tmp_path):
     assert writes_png(fig, tmp_path / "phase.png")
 
 
+def test_the_return_runs_holds_are_drawn_small_and_named(tmp_path):
+    # rodphase boundaries --hysteresis stores the holds of its return runs (params `load`)
+    # beside the runs that placed the lines: states reached by turning back, drawn small
+    table = sweep_table().assign(load=[np.nan, np.nan, 0.0, 0.0, np.nan, np.nan])
+    fig = plot.phase_map(table, tmp_path / "returns.png")
+    ax = fig.axes[0]
+    sizes = {tuple(c.get_offsets()[0]): c.get_sizes()[0] for c in ax.collections
+             if len(c.get_offsets()) == 1 and len(c.get_sizes())}
+    assert sizes[(1.02, 0.6)] > 2 * sizes[(1.2, 0.9)]  # a map run against a return hold
+    labels = [t.get_text() for t in fig.legends[0].get_texts()] if fig.legends else \
+        [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "small: turned back" in labels
+    assert writes_png(fig, tmp_path / "returns.png")
+
+
 def test_phase_map_all_straight_and_failed(tmp_path):
     table = pd.DataFrame({"twist_density": [0.0, 0.2, 0.4], "extension": [1.0, 1.1, 1.2],
                           "status": ["ok", "ok", "unstable"], "alignment": [np.nan] * 3,
