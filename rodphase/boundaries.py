@@ -5,17 +5,20 @@ The onset Φa_c(L/L0) comes from the model's own static stability (rod/onset.py)
 The plectoneme–solenoid boundary comes from runs of the scene's own dynamic protocol placed
 by bracketing. It runs nearly along the twist axis (solenoids win above an extension), so it
 is traced along lines of constant twist Φa ("levels"): on a level, the rod is buckled below
-the extension e*(Φa) where the onset line reaches Φa and straight above it; a plectoneme at
-the box's lowest extension and a solenoid just below e* bracket a boundary, which bisection
-narrows to `tolerance` in L/L0. A level with a plectoneme at both ends has none: the
+the extension e*(Φa) where the onset line reaches Φa and straight above it. A level starts
+in its middle (or, once a neighbour has a boundary, either side of that one) and searches
+until a plectoneme lies below a solenoid (Level.search): that bracket bisection narrows to
+`tolerance` in L/L0. A level whose top, just below e*, is still a plectoneme has none: the
 plectoneme gives way to the straight rod directly. Between the highest level without a
 boundary and the lowest with one lies the triple point, where the boundary meets the onset;
-new levels bisect that gap down to `twist_tolerance` in Φa.
+new levels bisect that gap down to `twist_tolerance` in Φa. With `hysteresis`, return runs
+twist past the onset and back (hysteresis_jobs).
 
 What near the triple point is normal is kept, not hidden: a `mixed` run counts on the
 plectoneme side, and the mixed runs between the last plectoneme and the first solenoid are
 the band it reports (`mixed_width`); a failed run inside a bracket is stepped around (the
-next probe takes the wider side) and counted; a hold that ran out of time keeps its label; a solenoid below a plectoneme on one level is flagged `non_monotone`.
+next probe takes the wider side) and counted; a hold that ran out of time keeps its label;
+a solenoid below a plectoneme on one level is flagged `non_monotone`.
 
 Every run is an ordinary run of the store (its id is its point; its params:
 twist_density, extension, and where it was placed: `level`, the level's index; `step`, its
@@ -117,6 +120,13 @@ def onset_line(scene, sweep, settings: Settings) -> pd.DataFrame:
     })
 
 
+def onset_twist(table: pd.DataFrame, extension):
+    """Φa_c at `extension` (scalar or array) from the onset rows of a boundaries table (its
+    NaN rows, where the rod was too coarse to answer, left out), interpolated linearly."""
+    onset = table[(table["kind"] == "onset") & table["twist_density"].notna()]
+    return np.interp(extension, onset["extension"], onset["twist_density"])
+
+
 def onset_extension(onset: pd.DataFrame, twist: float) -> float:
     """e*(Φa): the extension at which the onset line reaches `twist` (it rises with the
     extension); inf above the box (the rod buckles at every extension of it), the box's
@@ -208,11 +218,11 @@ class Level:
                 return self.high
             # the top failed (or stayed straight): between it and the highest buckled run
             buckled = [e for e, p in points if p in BUCKLED]
-            above = [e for e, p in points if p not in BUCKLED and buckled and e > max(buckled)]
-            if self.probes[self.high] in BUCKLED or not above:
+            if self.probes[self.high] in BUCKLED or not buckled:
                 return None
-            middle = 0.5 * (max(buckled) + min(above))
-            return middle if min(above) - max(buckled) > tolerance else None
+            a = max(buckled)
+            b = min(e for e, p in points if p not in BUCKLED and e > a)
+            return 0.5 * (a + b) if b - a > tolerance else None
         lowest = points[0][0]
         if self.guess is None:
             below = 0.5 * (self.low + lowest)
@@ -272,8 +282,9 @@ class Level:
 
     def next_probe(self, tolerance: float) -> float | None:
         """The next extension to run, or None once the bracket is narrower than tolerance
-        (without a bracket yet: search). A failed (or straight) probe inside the bracket splits it, and the widest gap with a
-        labelled shape at one end at least is narrowed next. A bracket that already holds
+        (without a bracket yet: search). A failed (or straight) probe inside the bracket
+        splits it, and the widest gap with a labelled shape at one end at least is narrowed
+        next. A bracket that already holds
         MAX_FAILED failed runs is left as it is (the model fails there: Fig 3's corner, where
         the paper's law leaves its range) and says so in its row."""
         bracket = self.bracket()
@@ -333,6 +344,11 @@ def _level(index: int, twist: float, onset: pd.DataFrame, sweep, settings: Setti
     return Level(index, twist, lo, min(hi, star - 0.25 * settings.tolerance))
 
 
+def slice_middles(lo: float, hi: float, count: int) -> np.ndarray:
+    """The middles of `count` equal slices of [lo, hi]: neither edge."""
+    return lo + (hi - lo) * (np.arange(count) + 0.5) / count
+
+
 def first_levels(onset: pd.DataFrame, sweep, settings: Settings) -> list[Level]:
     """`settings.levels` twists, each in the middle of an equal slice of the twist range from
     the onset at the box's lowest extension to the box's top (neither edge: no buckled
@@ -340,7 +356,7 @@ def first_levels(onset: pd.DataFrame, sweep, settings: Settings) -> list[Level]:
     stretched and its runs are the slowest and the likeliest to fail)."""
     lowest = float(onset["twist_density"].iloc[0])
     top = sweep.axes["twist_density"][1]
-    twists = lowest + (top - lowest) * (np.arange(settings.levels) + 0.5) / settings.levels
+    twists = slice_middles(lowest, top, settings.levels)
     return [_level(i, float(t), onset, sweep, settings) for i, t in enumerate(twists)]
 
 
@@ -431,9 +447,7 @@ HYSTERESIS_FLOOR = 0.3
 def hysteresis_extensions(sweep, settings: Settings) -> np.ndarray:
     """The loads of the return runs: `hysteresis_loads` extensions, each in the middle of an
     equal slice of the box's extension axis."""
-    lo, hi = sweep.axes["extension"]
-    k = np.arange(settings.hysteresis_loads)
-    return lo + (hi - lo) * (k + 0.5) / settings.hysteresis_loads
+    return slice_middles(*sweep.axes["extension"], settings.hysteresis_loads)
 
 
 def return_twists(critical: float, settings: Settings) -> list[float]:
@@ -453,11 +467,9 @@ def hysteresis_jobs(sweep, scene, onset: pd.DataFrame, settings: Settings) -> li
     from .units import turns_for_twist_density
 
     builder = _registered_builder(scene.scene)
-    ok = onset["twist_density"].notna()
     jobs = []
     for index, extension in enumerate(hysteresis_extensions(sweep, settings)):
-        critical = float(np.interp(extension, onset["extension"][ok], onset["twist_density"][ok]))
-        twists = return_twists(critical, settings)
+        twists = return_twists(float(onset_twist(onset, extension)), settings)
         cfg = scene_for(scene, {"twist_density": twists[0], "extension": float(extension)})
         targets = [turns_for_twist_density(t, cfg.rod.radius, cfg.rod.length) for t in twists]
         ids = [f"return-ext{extension:.6f}-phi{t:.6f}" for t in twists]
@@ -467,7 +479,7 @@ def hysteresis_jobs(sweep, scene, onset: pd.DataFrame, settings: Settings) -> li
     return jobs
 
 
-def restraighten_rows(runs: pd.DataFrame, onset: pd.DataFrame) -> list[dict]:
+def restraighten_rows(runs: pd.DataFrame) -> list[dict]:
     """One `restraighten` row per load of a classified table's return runs: the twist at which
     the buckled rod came back straight is bracketed by the lowest hold that stayed buckled
     and the next one down, which was straight. A load whose rod did not buckle past the onset,
@@ -578,11 +590,11 @@ def predict_phase(table: pd.DataFrame, twist, extension) -> np.ndarray:
     """The labels the lines of a boundaries table predict at points (Φa, L/L0) (arrays of
     one shape): straight below the onset; above it, a solenoid from the plectoneme–solenoid
     boundary's extension at that twist on (the line between its points, its end points held
-    beyond them; a bracket failed runs left wide is not one of them) and a plectoneme below it, and below the triple point's twist (or with no
-    boundary traced) a plectoneme everywhere."""
+    beyond them; a bracket failed runs left wide is not one of them) and a plectoneme below
+    it, and below the triple point's twist (or with no boundary traced) a plectoneme
+    everywhere."""
     twist, extension = np.broadcast_arrays(np.asarray(twist, float), np.asarray(extension, float))
-    onset = table[(table["kind"] == "onset") & table["twist_density"].notna()]
-    critical = np.interp(extension, onset["extension"], onset["twist_density"])
+    critical = onset_twist(table, extension)
     ps = table[table["kind"] == "plectoneme_solenoid"].sort_values("twist_density")
     ps = ps[~left_wide(ps)]
     out = np.where(twist < critical, "straight", "plectoneme").astype(object)
@@ -696,7 +708,7 @@ def trace(sweep, scene, output: str | None, *, only_onset: bool = False,
                     kind="sweep") as store:
         runs = store.table(classify_table(store))  # params, status and labels
         table = lines(onset, levels_from_store(runs, onset, sweep, settings), settings,
-                      restraighten_rows(runs, onset))
+                      restraighten_rows(runs))
         store.write_boundaries(table, column_units(), dataclasses.asdict(settings))
     return Trace(table, claims(table), report, onset_seconds, returns)
 
@@ -729,8 +741,7 @@ def summary(trace_: Trace) -> str:
     if len(back):
         out.append("restraighten (turned back from past the onset):  L/L0  Phi*a [bracket]"
                    "   onset   note")
-        critical = np.interp(back["extension"], onset["extension"], onset["twist_density"])
-        for r, c in zip(back.itertuples(), critical):
+        for r, c in zip(back.itertuples(), onset_twist(t, back["extension"])):
             out.append(f"  {r.extension:6.3f}  {r.twist_density:6.3f} [{r.twist_density_low:.3f}, "
                        f"{r.twist_density_high:.3f}]   {c:.3f}   {r.note}")
     c = trace_.claims

@@ -30,7 +30,7 @@ from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from . import units
-from .boundaries import left_wide
+from .boundaries import left_wide, onset_twist
 from .result import RunResult, rotation_put_in
 
 DPI = 200
@@ -341,8 +341,7 @@ def boundary_lines(ax, lines: pd.DataFrame) -> list:
     back = lines[lines["kind"] == "restraighten"].dropna(subset=["twist_density"])
     back = back.sort_values("extension")
     if len(back):
-        onset = lines[(lines["kind"] == "onset") & lines["twist_density"].notna()]
-        critical = np.interp(back["extension"], onset["extension"], onset["twist_density"])
+        critical = onset_twist(lines, back["extension"])
         handles.append(ax.fill_between(back["extension"], back["twist_density"], critical,
                                        color="0.5", alpha=0.15, lw=0, zorder=1,
                                        label="straight and buckled coexist"))

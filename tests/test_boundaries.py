@@ -156,18 +156,18 @@ def test_the_twist_of_restraightening_is_bracketed_by_the_return_holds():
         returns(["plectoneme", "mixed", "plectoneme", "solenoid", "solenoid"], twists, load=1),
         returns(["straight", "straight", "straight", "straight", "straight"], twists, load=2),
         returns(["plectoneme", "failed", "straight", "straight", "straight"], twists, load=3)])
-    rows = {int(k): r for k, r in enumerate(B.restraighten_rows(table, None))}
+    rows = {int(k): r for k, r in enumerate(B.restraighten_rows(table))}
     assert (rows[0]["twist_density_low"], rows[0]["twist_density_high"]) == (0.925, 0.95)
     assert rows[0]["twist_density"] == pytest.approx(0.9375) and rows[0]["note"] == ""
     assert rows[1]["twist_density_high"] == 0.9 and "still buckled" in rows[1]["note"]
     assert np.isnan(rows[2]["twist_density"]) and "did not buckle" in rows[2]["note"]
     assert np.isnan(rows[3]["twist_density"]) and "failed" in rows[3]["note"]
     assert all(r["kind"] == "restraighten" for r in rows.values())
-    assert B.restraighten_rows(table.drop(columns="load"), None) == []
+    assert B.restraighten_rows(table.drop(columns="load")) == []
     # a tight coil the classifier reads as straight still writhes: buckled
     coil = returns(["straight", "straight", "straight"], [1.05, 0.9, 0.8])
     coil["writhe"] = [2.5, 1.2, 0.0005]
-    (row,) = B.restraighten_rows(coil, None)
+    (row,) = B.restraighten_rows(coil)
     assert (row["twist_density_low"], row["twist_density_high"]) == (0.8, 0.9)
 
 
