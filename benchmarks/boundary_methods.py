@@ -40,7 +40,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -49,7 +48,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from rodphase.studytools import boundary_error, machine, sweep_table, write_block
+from rodphase.studytools import boundary_error, machine, sweep_table, timed_rodphase, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "perf"
@@ -80,26 +79,12 @@ METHODS = {
 }
 
 
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
 def timed(command: str, config: str, store: Path, extra: list[str], jobs: int = 2):
-    """(wall [s], CPU [s]) of one rodphase command into a fresh store."""
+    """(wall [s], CPU [s]) of one rodphase command into a fresh store (timed_rodphase):
+    a sweep's `extra` are --set items, the boundaries' options."""
     store.unlink(missing_ok=True)
-    args = [RODPHASE, command, config, "-o", str(store), "--jobs", str(jobs), "--quiet"]
-    if command == "sweep":
-        for item in extra:
-            args += ["--set", item]
-    else:
-        args += extra
-    cpu0, t0 = children_cpu(), time.perf_counter()
-    done = subprocess.run(args, capture_output=True, text=True)
-    wall, cpu = time.perf_counter() - t0, children_cpu() - cpu0
-    if done.returncode not in (0, 1):
-        raise SystemExit(f"{' '.join(args)} exited {done.returncode}:\n{done.stderr}")
-    return wall, cpu
+    args = [a for item in extra for a in ("--set", item)] if command == "sweep" else extra
+    return timed_rodphase(command, config, store, args, jobs)
 
 
 def warm() -> None:

@@ -50,30 +50,41 @@ def classified_sweep(config: str, path: Path, sets: list[str], jobs: int) -> flo
     return timed_sweep(config, path, sets, jobs)[0]
 
 
-def timed_sweep(config: str, path: Path, sets: list[str], jobs: int) -> tuple[float, float]:
-    """classified_sweep's sweep, and its cost: (wall [s], CPU [s]: user + system of the
-    sweep process and the workers it waited for, the compile included)."""
+def timed_rodphase(command: str, config: str, path: Path, args: list[str],
+                   jobs: int) -> tuple[float, float]:
+    """`rodphase COMMAND CONFIG -o PATH --jobs JOBS --quiet ARGS` and its cost: (wall [s],
+    CPU [s]: user + system of the command's process and the workers it waited for, the
+    compile included). A command whose runs partly failed (exit 1: they are recorded) is
+    fine; any other exit stops."""
     import resource
     import subprocess
     import sys
     import time
 
     rodphase = str(Path(sys.executable).with_name("rodphase"))
-    args = [rodphase, "sweep", config, "-o", str(path), "--jobs", str(jobs), "--quiet"]
-    for item in sets:
-        args += ["--set", item]
+    argv = [rodphase, command, config, "-o", str(path), "--jobs", str(jobs), "--quiet", *args]
 
     def children() -> float:
         usage = resource.getrusage(resource.RUSAGE_CHILDREN)
         return usage.ru_utime + usage.ru_stime
 
     cpu0, t0 = children(), time.perf_counter()
-    done = subprocess.run(args)
+    done = subprocess.run(argv)
     wall, cpu = time.perf_counter() - t0, children() - cpu0
     if done.returncode not in (0, 1):
-        raise SystemExit(f"{' '.join(args)} exited {done.returncode}")
-    subprocess.run([rodphase, "classify", str(path)], check=True, capture_output=True)
+        raise SystemExit(f"{' '.join(argv)} exited {done.returncode}")
     return wall, cpu
+
+
+def timed_sweep(config: str, path: Path, sets: list[str], jobs: int) -> tuple[float, float]:
+    """classified_sweep's sweep, and its cost (timed_rodphase); classified afterwards."""
+    import subprocess
+    import sys
+
+    timed = timed_rodphase("sweep", config, path, [a for s in sets for a in ("--set", s)], jobs)
+    rodphase = str(Path(sys.executable).with_name("rodphase"))
+    subprocess.run([rodphase, "classify", str(path)], check=True, capture_output=True)
+    return timed
 
 
 def sweep_table(path: Path):
