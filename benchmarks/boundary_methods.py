@@ -6,6 +6,7 @@ r"""The boundaries of Fig 3 against its maps of dots (issue #45): wall time, wor
     python benchmarks/boundary_methods.py reference --reference half_rate
     python benchmarks/boundary_methods.py compare [--write]      # work-precision, interleaved
     python benchmarks/boundary_methods.py errors [--write]       # compare's errors again, no runs
+    python benchmarks/boundary_methods.py protocols [--write]    # what moves the missed labels
 
 `timing` runs `rodphase boundaries fig3_paper` and `rodphase sweep fig3_paper` (today's
 200-point map), both `--jobs 2`, each into a fresh store, alternating (B S S B ...), and
@@ -21,6 +22,10 @@ point (± 0.01 L/L0, ± 0.05 Φa); it runs them with the paper's protocol step b
 step, at the scene's twist rate (paper_rate) or at half of it (half_rate): finer and free of
 every shortcut the methods take. Placed by one method's lines, so it favours no sampler of
 dots, and it asks every method the question the lines answer.
+
+`protocols` runs the half-rate reference's points whose label the default lines miss with
+the map's protocol and with each of the reference's departures from it alone (from rest;
+n = 140 and a quarter step; 0.25 turns/s): which one moves the label.
 
 `compare` runs, interleaved in one process: random and Sobol maps of 50, 100 and 200 points
 (fig3_paper with sampler random/sobol), the adaptive sampler's 120 and 200
@@ -203,6 +208,59 @@ def reference(jobs: int, which: str) -> None:
     print(json.dumps(info, indent=1))
 
 
+# ---------------------------------------------------------------- which part of a protocol
+
+# the map's protocol, and each way the half-rate reference departs from it, one at a time
+PROTOCOLS = {"the map's": [], "from rest": ["loading.quasi_static_below=0"],
+             "n = 140, a quarter step": ["rod.elements=140", "solver.safety=0.25"],
+             "0.25 turns/s": ["loading.twist_rate=0.25"]}
+
+
+def _label(sets: list[str], point: dict) -> str:
+    from rodphase import config
+    from rodphase.runner import run_scene
+    from rodphase.scenes import SCENES
+    from rodphase.sweep import scene_for
+    from rodphase.tabulate import summarize
+
+    _, scene = config.load_sweep("configs/fig3_paper.yaml",
+                                 [tuple(item.split("=", 1)) for item in sets], SCENES)
+    return summarize(run_scene(scene_for(scene, point)))["phase"]
+
+
+def protocols(jobs: int, write: bool) -> None:
+    """The reference points (half rate) whose label the default lines miss, run with the
+    map's protocol and with each of the reference's departures from it alone: which one
+    moves the label."""
+    from joblib import Parallel, delayed
+
+    from rodphase.boundaries import predict_phase
+
+    ref, _ = usable_reference("half_rate")
+    guessed = predict_phase(traced_lines(), ref["twist_density"].to_numpy(),
+                            ref["extension"].to_numpy())
+    missed = ref[guessed != ref["phase"].to_numpy()]
+    points = [{"twist_density": float(r.twist_density), "extension": float(r.extension)}
+              for r in missed.itertuples()]
+    labels = Parallel(n_jobs=jobs)(delayed(_label)(sets, point)
+                                   for sets in PROTOCOLS.values() for point in points)
+    when, where = time.strftime("%Y-%m-%d", time.gmtime()), machine()
+    from rodphase.studytools import git_commit
+
+    lines = [f"Measured {when} at {git_commit()} on {where['cpu']}, {where['nproc']} cores "
+             "(`python benchmarks/boundary_methods.py protocols`).", "",
+             "| Φa | L/L0 | reference, 0.25 turns/s from rest, n = 140 | "
+             + " | ".join(PROTOCOLS) + " |", "|---|---|---|" + "---|" * len(PROTOCOLS)]
+    for k, (point, r) in enumerate(zip(points, missed.itertuples())):
+        row = [labels[v * len(points) + k] for v in range(len(PROTOCOLS))]
+        lines.append(f"| {point['twist_density']:.4f} | {point['extension']:.4f} | {r.phase} | "
+                     + " | ".join(row) + " |")
+    text = "\n".join(lines)
+    print(text)
+    if write:
+        write_block(ROOT / "docs" / "explanation" / "performance.md", "boundary_protocols", text)
+
+
 # ---------------------------------------------------------------- work against precision
 
 def usable_reference(which: str) -> tuple[pd.DataFrame, dict]:
@@ -339,7 +397,8 @@ def chart(frame: pd.DataFrame, which: str) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("step", choices=["timing", "reference", "compare", "errors"])
+    parser.add_argument("step", choices=["timing", "reference", "compare", "errors",
+                                         "protocols"])
     parser.add_argument("--pairs", type=int, default=2, help="timing: pairs")
     parser.add_argument("--rounds", type=int, default=1, help="compare: rounds")
     parser.add_argument("--jobs", type=int, default=2)
@@ -360,6 +419,8 @@ def main() -> None:
         reference(args.jobs, args.reference)
     elif args.step == "errors":
         errors(args.write)
+    elif args.step == "protocols":
+        protocols(args.jobs, args.write)
     else:
         methods = [m.strip() for m in args.methods.split(";") if m.strip()]
         unknown = [m for m in methods if m not in METHODS]
