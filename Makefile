@@ -121,6 +121,7 @@ bench-lines: $(STAMP)  ## Fig 3 as lines against the maps of dots: wall (interle
 	@test -f out/perf/boundary_reference_paper_rate.csv || $(BIN)/python benchmarks/boundary_methods.py reference
 	@test -f out/perf/boundary_reference_half_rate.csv || $(BIN)/python benchmarks/boundary_methods.py reference --reference half_rate
 	$(BIN)/python benchmarks/boundary_methods.py compare --write
+	$(BIN)/python benchmarks/boundary_methods.py protocols --write
 
 bench-map-methods: $(STAMP)  ## Fig 3 independent vs along paths: CPU, wall, boundary error against a fine reference (~35 min)
 	@test -f out/perf/map_reference.h5 || $(BIN)/python benchmarks/map_methods.py reference
